@@ -1,0 +1,429 @@
+//! Calibrated cameras: the OpenCV pinhole model with distortion `[k1, k2, p1, p2, k3]` and
+//! optional skew, as `shared/dataset-format.md` states it, and `calib/cameras.yaml` I/O.
+//!
+//! Convention: a world point `X` (metres) maps to camera coordinates `x_c = R·X + t`; the
+//! normalized coordinates `(x, y) = (x_c/z_c, y_c/z_c)` are distorted to `(x', y')` and the
+//! pixel is `(u, v) = (fx·x' + s·y' + cx, fy·y' + cy)`. Pixel centres lie on integer
+//! coordinates (the top-left pixel's centre is (0, 0)); the camera looks along +z, image x
+//! goes right and y goes down.
+
+use crate::error::{Error, Result};
+use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
+use serde::Deserialize;
+use std::collections::HashSet;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Tolerance on `R·Rᵀ = I` and `det R = 1` when a calibration is loaded.
+pub const ROTATION_TOLERANCE: f64 = 1e-6;
+
+/// One calibrated camera.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Camera {
+    /// Camera name; also the name of its image folders.
+    pub name: String,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+    /// Skew `K[0][1]`, pixels (0 for most cameras).
+    pub skew: f64,
+    /// OpenCV distortion `[k1, k2, p1, p2, k3]`.
+    pub dist: [f64; 5],
+    /// World-to-camera rotation.
+    pub r: Matrix3<f64>,
+    /// World-to-camera translation, metres.
+    pub t: Vector3<f64>,
+}
+
+impl Camera {
+    /// An ideal camera (no distortion, no skew) at `centre` looking at `target`, with `up`
+    /// giving the world direction that appears upwards in the image.
+    #[allow(clippy::too_many_arguments)]
+    pub fn look_at(
+        name: &str,
+        width: u32,
+        height: u32,
+        focal_px: f64,
+        centre: Vector3<f64>,
+        target: Vector3<f64>,
+        up: Vector3<f64>,
+    ) -> Camera {
+        let z = (target - centre).normalize();
+        // Image y goes down, so the camera's y axis is the negated up direction.
+        let x = z.cross(&up).normalize();
+        let y = z.cross(&x);
+        let r = Matrix3::from_rows(&[x.transpose(), y.transpose(), z.transpose()]);
+        Camera {
+            name: name.to_string(),
+            width,
+            height,
+            fx: focal_px,
+            fy: focal_px,
+            cx: (width as f64 - 1.0) / 2.0,
+            cy: (height as f64 - 1.0) / 2.0,
+            skew: 0.0,
+            dist: [0.0; 5],
+            r,
+            t: -(r * centre),
+        }
+    }
+
+    /// The 3x3 intrinsic matrix K.
+    pub fn k_matrix(&self) -> Matrix3<f64> {
+        Matrix3::new(
+            self.fx, self.skew, self.cx, 0.0, self.fy, self.cy, 0.0, 0.0, 1.0,
+        )
+    }
+
+    /// Camera centre in world coordinates, metres: `-Rᵀ t`.
+    pub fn centre(&self) -> Vector3<f64> {
+        -(self.r.transpose() * self.t)
+    }
+
+    /// World point to camera coordinates (metres, +z forward).
+    pub fn to_camera(&self, x: &Vector3<f64>) -> Vector3<f64> {
+        self.r * x + self.t
+    }
+
+    /// Whether any distortion coefficient is non-zero.
+    pub fn has_distortion(&self) -> bool {
+        self.dist.iter().any(|&d| d != 0.0)
+    }
+
+    /// Applies the OpenCV distortion to normalized coordinates.
+    pub fn distort(&self, n: Vector2<f64>) -> Vector2<f64> {
+        let [k1, k2, p1, p2, k3] = self.dist;
+        let (x, y) = (n.x, n.y);
+        let r2 = x * x + y * y;
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        Vector2::new(
+            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+        )
+    }
+
+    /// Jacobian of [`Camera::distort`] with respect to the normalized coordinates.
+    fn distort_jacobian(&self, n: Vector2<f64>) -> Matrix2<f64> {
+        let [k1, k2, p1, p2, k3] = self.dist;
+        let (x, y) = (n.x, n.y);
+        let r2 = x * x + y * y;
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        // d(radial)/d(r2)
+        let dradial = k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3);
+        let dxdx = radial + x * dradial * 2.0 * x + 2.0 * p1 * y + 6.0 * p2 * x;
+        let dxdy = x * dradial * 2.0 * y + 2.0 * p1 * x + 2.0 * p2 * y;
+        let dydx = y * dradial * 2.0 * x + 2.0 * p1 * x + 2.0 * p2 * y;
+        let dydy = radial + y * dradial * 2.0 * y + 6.0 * p1 * y + 2.0 * p2 * x;
+        Matrix2::new(dxdx, dxdy, dydx, dydy)
+    }
+
+    /// Removes the distortion from distorted normalized coordinates (inverse of
+    /// [`Camera::distort`]) by Newton's method; exact to ~1e-15 for realistic lenses.
+    pub fn undistort(&self, d: Vector2<f64>) -> Vector2<f64> {
+        if !self.has_distortion() {
+            return d;
+        }
+        let mut n = d;
+        for _ in 0..50 {
+            let residual = self.distort(n) - d;
+            if residual.norm() < 1e-15 {
+                break;
+            }
+            let step = match self.distort_jacobian(n).try_inverse() {
+                Some(inv) => inv * residual,
+                None => break,
+            };
+            n -= step;
+        }
+        n
+    }
+
+    /// Normalized (undistorted) coordinates to a pixel.
+    pub fn normalized_to_pixel(&self, n: Vector2<f64>) -> Vector2<f64> {
+        let d = self.distort(n);
+        Vector2::new(
+            self.fx * d.x + self.skew * d.y + self.cx,
+            self.fy * d.y + self.cy,
+        )
+    }
+
+    /// A pixel to normalized (undistorted) coordinates.
+    pub fn pixel_to_normalized(&self, px: Vector2<f64>) -> Vector2<f64> {
+        let yd = (px.y - self.cy) / self.fy;
+        let xd = (px.x - self.cx - self.skew * yd) / self.fx;
+        self.undistort(Vector2::new(xd, yd))
+    }
+
+    /// Projects a world point; returns the pixel and the depth `z_c` (metres). The pixel is
+    /// meaningless when the depth is not positive.
+    pub fn project_with_depth(&self, x: &Vector3<f64>) -> (Vector2<f64>, f64) {
+        let c = self.to_camera(x);
+        let n = Vector2::new(c.x / c.z, c.y / c.z);
+        (self.normalized_to_pixel(n), c.z)
+    }
+
+    /// Projects a world point in front of the camera; `None` behind it.
+    pub fn project(&self, x: &Vector3<f64>) -> Option<Vector2<f64>> {
+        let (px, z) = self.project_with_depth(x);
+        (z > 0.0).then_some(px)
+    }
+
+    /// The world point seen at pixel `px` at depth `depth` (metres along the optical axis).
+    pub fn backproject(&self, px: Vector2<f64>, depth: f64) -> Vector3<f64> {
+        let n = self.pixel_to_normalized(px);
+        let c = Vector3::new(n.x * depth, n.y * depth, depth);
+        self.r.transpose() * (c - self.t)
+    }
+
+    /// The viewing ray through pixel `px`: (camera centre, unit direction), world frame.
+    pub fn ray(&self, px: Vector2<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        let n = self.pixel_to_normalized(px);
+        let dir = self.r.transpose() * Vector3::new(n.x, n.y, 1.0);
+        (self.centre(), dir.normalize())
+    }
+
+    /// Whether pixel `px` lies inside the image (pixel centres at integers, so the image
+    /// spans [-0.5, width-0.5) x [-0.5, height-0.5)).
+    pub fn in_image(&self, px: &Vector2<f64>) -> bool {
+        px.x >= -0.5
+            && px.y >= -0.5
+            && px.x < self.width as f64 - 0.5
+            && px.y < self.height as f64 - 0.5
+    }
+
+    /// Checks the values a calibration must satisfy; the message names what is wrong.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err(format!(
+                "image size {}x{} must be positive",
+                self.width, self.height
+            ));
+        }
+        let numbers = [self.fx, self.fy, self.cx, self.cy, self.skew]
+            .into_iter()
+            .chain(self.dist)
+            .chain(self.r.iter().copied())
+            .chain(self.t.iter().copied());
+        if numbers.into_iter().any(|v| !v.is_finite()) {
+            return Err("K, dist, R and t must hold finite numbers".into());
+        }
+        if self.fx <= 0.0 || self.fy <= 0.0 {
+            return Err(format!(
+                "focal lengths must be positive (fx = {}, fy = {})",
+                self.fx, self.fy
+            ));
+        }
+        let ortho = (self.r * self.r.transpose() - Matrix3::identity())
+            .abs()
+            .max();
+        let det = self.r.determinant();
+        if ortho > ROTATION_TOLERANCE || (det - 1.0).abs() > ROTATION_TOLERANCE {
+            return Err(format!(
+                "R is not a rotation: |R·Rᵀ - I| = {ortho:.3e} and det R = {det:.9} \
+                 (need R orthonormal with det +1 within {ROTATION_TOLERANCE:e}); \
+                 check that R is the world-to-camera rotation matrix, row by row"
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Camera names become folder names: refuse anything that is not a plain file name.
+pub fn check_name(name: &str) -> std::result::Result<(), String> {
+    if name.is_empty() {
+        return Err("the name is empty".into());
+    }
+    if name == "." || name == ".." || name.contains(['/', '\\']) {
+        return Err(format!(
+            "the name '{name}' is used as a folder name and must not contain '/', '\\' or be '.' or '..'"
+        ));
+    }
+    if name.chars().any(|c| c.is_control()) {
+        return Err(format!("the name {name:?} contains control characters"));
+    }
+    Ok(())
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CamerasFile {
+    cameras: Vec<CameraEntry>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+#[allow(non_snake_case)]
+struct CameraEntry {
+    name: String,
+    width: u32,
+    height: u32,
+    K: [[f64; 3]; 3],
+    #[serde(default)]
+    dist: Option<Vec<f64>>,
+    R: [[f64; 3]; 3],
+    t: [f64; 3],
+}
+
+/// Parses cameras.yaml text (`path` only names the file in errors) and validates it.
+pub fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
+    let file: CamerasFile = crate::yaml::from_str(path, text)?;
+    if file.cameras.is_empty() {
+        return Err(Error::invalid(path, "the calibration lists no camera"));
+    }
+    let mut seen = HashSet::new();
+    let mut cameras = Vec::with_capacity(file.cameras.len());
+    for e in file.cameras {
+        let bad = |msg: String| Error::invalid(path, format!("camera '{}': {msg}", e.name));
+        check_name(&e.name).map_err(&bad)?;
+        if !seen.insert(e.name.clone()) {
+            return Err(bad(
+                "the name is used twice; camera names must be unique".into()
+            ));
+        }
+        let k = e.K;
+        if k[1][0] != 0.0 || k[2][0] != 0.0 || k[2][1] != 0.0 || k[2][2] != 1.0 {
+            return Err(bad(format!(
+                "K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got {k:?}"
+            )));
+        }
+        let dist = match e.dist.as_deref() {
+            None => [0.0; 5],
+            Some(d) if d.len() <= 5 => {
+                let mut full = [0.0; 5];
+                full[..d.len()].copy_from_slice(d);
+                full
+            }
+            Some(d) => {
+                return Err(bad(format!(
+                    "dist has {} values; expected [k1, k2, p1, p2, k3]",
+                    d.len()
+                )))
+            }
+        };
+        let cam = Camera {
+            name: e.name.clone(),
+            width: e.width,
+            height: e.height,
+            fx: k[0][0],
+            fy: k[1][1],
+            cx: k[0][2],
+            cy: k[1][2],
+            skew: k[0][1],
+            dist,
+            r: Matrix3::from_fn(|i, j| e.R[i][j]),
+            t: Vector3::new(e.t[0], e.t[1], e.t[2]),
+        };
+        cam.validate().map_err(&bad)?;
+        cameras.push(cam);
+    }
+    Ok(cameras)
+}
+
+/// Reads and validates `calib/cameras.yaml`.
+pub fn read_cameras(path: &Path) -> Result<Vec<Camera>> {
+    let text = crate::fsutil::read_to_string(path)?;
+    parse_cameras(path, &text)
+}
+
+/// The cameras.yaml text for `cameras` (flow-style rows as in the dataset contract; numbers
+/// printed in Rust's shortest round-trip form, so reading it back gives identical values).
+pub fn cameras_to_yaml(cameras: &[Camera]) -> String {
+    let row = |v: [f64; 3]| format!("[{:?}, {:?}, {:?}]", v[0], v[1], v[2]);
+    let mut s = String::from("cameras:\n");
+    for c in cameras {
+        let r = |i: usize| row([c.r[(i, 0)], c.r[(i, 1)], c.r[(i, 2)]]);
+        let _ = writeln!(s, "  - name: {}", c.name);
+        let _ = writeln!(s, "    width: {}", c.width);
+        let _ = writeln!(s, "    height: {}", c.height);
+        let _ = writeln!(
+            s,
+            "    K: [{}, {}, [0.0, 0.0, 1.0]]",
+            row([c.fx, c.skew, c.cx]),
+            row([0.0, c.fy, c.cy])
+        );
+        let d = c.dist;
+        let _ = writeln!(
+            s,
+            "    dist: [{:?}, {:?}, {:?}, {:?}, {:?}]",
+            d[0], d[1], d[2], d[3], d[4]
+        );
+        let _ = writeln!(s, "    R: [{}, {}, {}]", r(0), r(1), r(2));
+        let _ = writeln!(s, "    t: {}", row([c.t.x, c.t.y, c.t.z]));
+    }
+    s
+}
+
+/// Writes cameras.yaml atomically.
+pub fn write_cameras(path: &Path, cameras: &[Camera]) -> Result<()> {
+    crate::fsutil::write_atomic(path, cameras_to_yaml(cameras).as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn test_camera() -> Camera {
+        let mut c = Camera::look_at(
+            "c",
+            640,
+            480,
+            800.0,
+            Vector3::new(3.0, 1.0, 1.5),
+            Vector3::new(0.0, 0.0, 1.0),
+            Vector3::z(),
+        );
+        c.dist = [-0.12, 0.05, 0.001, -0.0015, -0.01];
+        c.skew = 0.7;
+        c
+    }
+
+    #[test]
+    fn undistort_inverts_distort() {
+        let c = test_camera();
+        for &(x, y) in &[(0.0, 0.0), (0.3, -0.2), (-0.4, 0.35), (0.1, 0.45)] {
+            let n = Vector2::new(x, y);
+            let back = c.undistort(c.distort(n));
+            assert!((back - n).norm() < 1e-13, "{n:?} -> {back:?}");
+        }
+    }
+
+    #[test]
+    fn backproject_inverts_project() {
+        let c = test_camera();
+        let p = Vector3::new(0.2, -0.3, 1.1);
+        let (px, depth) = c.project_with_depth(&p);
+        let q = c.backproject(px, depth);
+        assert!((p - q).norm() < 1e-12);
+        let (o, d) = c.ray(px);
+        let along = (p - o).normalize();
+        assert!((along - d).norm() < 1e-12);
+    }
+
+    #[test]
+    fn look_at_puts_target_at_principal_point() {
+        let c = Camera::look_at(
+            "c",
+            101,
+            81,
+            500.0,
+            Vector3::new(0.0, -4.0, 2.0),
+            Vector3::new(0.0, 0.0, 1.0),
+            Vector3::z(),
+        );
+        let px = c.project(&Vector3::new(0.0, 0.0, 1.0)).unwrap();
+        assert!((px - Vector2::new(50.0, 40.0)).norm() < 1e-9);
+        // A point above the target appears above (smaller v).
+        let up = c.project(&Vector3::new(0.0, 0.0, 1.2)).unwrap();
+        assert!(up.y < px.y);
+        assert!(c.validate().is_ok());
+    }
+}

@@ -1,0 +1,125 @@
+//! `pipeline.yaml`: what to process and where results go. Paths are relative to the YAML
+//! file. Unknown keys and wrong types are errors naming the key and the line.
+
+use crate::error::{Error, Result};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// An inclusive range of frame indices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameRange {
+    pub first: u32,
+    pub last: u32,
+}
+
+impl FrameRange {
+    /// Parses `A..B` (inclusive at both ends) or a single frame `A`.
+    pub fn parse(s: &str) -> std::result::Result<FrameRange, String> {
+        let err =
+            || format!("'{s}' is not a frame range; write A..B (inclusive) or a single frame A");
+        let (a, b) = match s.split_once("..") {
+            Some((a, b)) => (a.trim(), b.trim()),
+            None => (s.trim(), s.trim()),
+        };
+        let first: u32 = a.parse().map_err(|_| err())?;
+        let last: u32 = b.parse().map_err(|_| err())?;
+        if last < first {
+            return Err(format!("frame range '{s}' ends before it starts"));
+        }
+        Ok(FrameRange { first, last })
+    }
+
+    pub fn contains(&self, f: u32) -> bool {
+        (self.first..=self.last).contains(&f)
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PipelineFile {
+    calibration: PathBuf,
+    sequence: PathBuf,
+    #[serde(default)]
+    frames: Option<String>,
+    #[serde(default = "default_cache")]
+    cache: PathBuf,
+    #[serde(default = "default_output")]
+    output: PathBuf,
+}
+
+fn default_cache() -> PathBuf {
+    PathBuf::from("cache")
+}
+
+fn default_output() -> PathBuf {
+    PathBuf::from("output")
+}
+
+/// A loaded pipeline configuration with paths resolved against the YAML file's folder.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The pipeline.yaml file.
+    pub path: PathBuf,
+    /// calib/cameras.yaml.
+    pub calibration: PathBuf,
+    /// data/<sequence>.
+    pub sequence: PathBuf,
+    /// Frames to process; `None` for every frame of the sequence.
+    pub frames: Option<FrameRange>,
+    /// Cache folder.
+    pub cache: PathBuf,
+    /// Output folder.
+    pub output: PathBuf,
+}
+
+impl Config {
+    /// Reads and checks pipeline.yaml (paths must exist where they are inputs).
+    pub fn load(path: &Path) -> Result<Config> {
+        let file: PipelineFile = crate::yaml::read(path)?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let frames = file
+            .frames
+            .as_deref()
+            .filter(|s| s.trim() != "all")
+            .map(FrameRange::parse)
+            .transpose()
+            .map_err(|m| Error::invalid(path, format!("key 'frames': {m}")))?;
+        let config = Config {
+            path: path.to_path_buf(),
+            calibration: base.join(&file.calibration),
+            sequence: base.join(&file.sequence),
+            frames,
+            cache: base.join(&file.cache),
+            output: base.join(&file.output),
+        };
+        for (key, p, dir) in [
+            ("calibration", &config.calibration, false),
+            ("sequence", &config.sequence, true),
+        ] {
+            let ok = if dir { p.is_dir() } else { p.is_file() };
+            if !ok {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "key '{key}': {} does not exist (paths are relative to the pipeline file)",
+                        p.display()
+                    ),
+                ));
+            }
+        }
+        Ok(config)
+    }
+}
+
+/// The pipeline.yaml text for a capture at `calibration` and `sequence` (relative paths).
+pub fn default_yaml(calibration: &str, sequence: &str) -> String {
+    format!(
+        "# hullpose pipeline: paths are relative to this file.\n\
+         calibration: {calibration}\n\
+         sequence: {sequence}\n\
+         # frames to process: A..B (inclusive) or all\n\
+         frames: all\n\
+         cache: cache\n\
+         output: output\n"
+    )
+}

@@ -1,0 +1,334 @@
+//! Capture sequences on disk (`data/<sequence>/`, `shared/dataset-format.md`): discovery of
+//! cameras and frames, consistency checks against the calibration, and loading of frames,
+//! background plates, masks, the skeleton and ground truth.
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::geometry::TriMesh;
+use crate::joints::JointRow;
+use crate::skeleton::Skeleton;
+use image::{GrayImage, RgbImage};
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+/// Image file extensions accepted for frames, in order of preference.
+const FRAME_EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
+
+/// A capture sequence checked against its calibration.
+#[derive(Debug, Clone)]
+pub struct Sequence {
+    /// The sequence folder `data/<sequence>`.
+    pub dir: PathBuf,
+    /// The calibration, in the order of cameras.yaml.
+    pub cameras: Vec<Camera>,
+    /// Frame indices present for every camera, ascending.
+    pub frames: Vec<u32>,
+    /// File extension of each camera's frames (png, jpg or jpeg).
+    frame_ext: Vec<&'static str>,
+    /// Whether given masks (`masks/`) are present.
+    pub has_masks: bool,
+    /// Whether every camera has a background plate.
+    pub has_backgrounds: bool,
+    /// Things that are odd but not fatal (extra folders, stray files).
+    pub warnings: Vec<String>,
+}
+
+/// The name of frame `index`'s files: the zero-padded six-digit index.
+pub fn frame_stem(index: u32) -> String {
+    format!("{index:06}")
+}
+
+/// Reads an image's dimensions from its header without decoding it.
+pub fn image_dimensions(path: &Path) -> Result<(u32, u32)> {
+    image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?
+        .into_dimensions()
+        .map_err(|e| Error::invalid(path, format!("cannot read the image: {e}")))
+}
+
+fn decode(path: &Path) -> Result<image::DynamicImage> {
+    image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?
+        .decode()
+        .map_err(|e| Error::invalid(path, format!("cannot decode the image: {e}")))
+}
+
+fn check_size(path: &Path, cam: &Camera, w: u32, h: u32) -> Result<()> {
+    if (w, h) != (cam.width, cam.height) {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "image is {w}x{h} but camera '{}' is calibrated for {}x{}; \
+                 resize the images or fix width/height in the calibration",
+                cam.name, cam.width, cam.height
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Frame indices found in `dir` (files named NNNNNN.<ext>), with their extension; other
+/// files are reported in `warnings`.
+fn list_frames(dir: &Path, warnings: &mut Vec<String>) -> Result<Vec<(u32, &'static str)>> {
+    let mut found = Vec::new();
+    let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    for entry in entries {
+        let entry = entry.map_err(|e| Error::io(dir, e))?;
+        let path = entry.path();
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') {
+            continue; // hidden files, e.g. temporary files of an interrupted writer
+        }
+        let parsed = path.extension().and_then(|e| e.to_str()).and_then(|ext| {
+            let ext = ext.to_ascii_lowercase();
+            let known = FRAME_EXTENSIONS.iter().find(|&&k| k == ext)?;
+            let stem = path.file_stem()?.to_str()?;
+            (stem.len() == 6 && stem.bytes().all(|b| b.is_ascii_digit()))
+                .then(|| (stem.parse().ok(), *known))
+        });
+        match parsed {
+            Some((Some(i), ext)) => found.push((i, ext)),
+            _ => warnings.push(format!(
+                "{}: not a frame file (NNNNNN.png), ignored",
+                path.display()
+            )),
+        }
+    }
+    found.sort();
+    Ok(found)
+}
+
+impl Sequence {
+    /// Opens the sequence in `dir` for the cameras of `cameras`; `calib_path` names the
+    /// calibration in messages. Checks that every calibrated camera has a frame folder
+    /// holding every frame, that image sizes match the calibration (from the headers), and
+    /// the same for masks when present.
+    pub fn open(dir: &Path, cameras: Vec<Camera>, calib_path: &Path) -> Result<Sequence> {
+        let frames_dir = dir.join("frames");
+        if !frames_dir.is_dir() {
+            return Err(Error::invalid(
+                &frames_dir,
+                "the sequence has no frames/ folder (expected frames/<camera>/NNNNNN.png)",
+            ));
+        }
+        let mut warnings = Vec::new();
+        // Folders that no calibrated camera claims.
+        let mut folders: BTreeSet<String> = BTreeSet::new();
+        for entry in std::fs::read_dir(&frames_dir).map_err(|e| Error::io(&frames_dir, e))? {
+            let entry = entry.map_err(|e| Error::io(&frames_dir, e))?;
+            if entry.path().is_dir() {
+                folders.insert(entry.file_name().to_string_lossy().into_owned());
+            }
+        }
+        for name in &folders {
+            if !cameras.iter().any(|c| &c.name == name) {
+                warnings.push(format!(
+                    "{}: no camera of {} has this name; folder ignored",
+                    frames_dir.join(name).display(),
+                    calib_path.display()
+                ));
+            }
+        }
+        let mut per_camera = Vec::with_capacity(cameras.len());
+        for cam in &cameras {
+            let cam_dir = frames_dir.join(&cam.name);
+            if !cam_dir.is_dir() {
+                return Err(Error::invalid(
+                    &cam_dir,
+                    format!(
+                        "missing frame folder for camera '{}' of {}; every calibrated camera needs frames/<camera>/",
+                        cam.name,
+                        calib_path.display()
+                    ),
+                ));
+            }
+            per_camera.push(list_frames(&cam_dir, &mut warnings)?);
+        }
+        let all: BTreeSet<u32> = per_camera.iter().flatten().map(|&(i, _)| i).collect();
+        if all.is_empty() {
+            return Err(Error::invalid(
+                &frames_dir,
+                "no frame files (NNNNNN.png) found",
+            ));
+        }
+        let mut frame_ext = Vec::with_capacity(cameras.len());
+        for (cam, list) in cameras.iter().zip(&per_camera) {
+            let have: BTreeSet<u32> = list.iter().map(|&(i, _)| i).collect();
+            if let Some(&missing) = all.difference(&have).next() {
+                return Err(Error::invalid(
+                    frames_dir.join(&cam.name).join(format!("{}.png", frame_stem(missing))),
+                    format!(
+                        "camera '{}' lacks frame {missing}, which other cameras have; every camera needs every frame",
+                        cam.name
+                    ),
+                ));
+            }
+            frame_ext.push(list.first().map(|&(_, e)| e).unwrap_or("png"));
+        }
+        let masks_dir = dir.join("masks");
+        let has_masks = masks_dir.is_dir();
+        let bg_dir = dir.join("background");
+        let has_backgrounds = bg_dir.is_dir()
+            && cameras
+                .iter()
+                .all(|c| bg_dir.join(format!("{}.png", c.name)).is_file());
+        if bg_dir.is_dir() && !has_backgrounds {
+            warnings.push(format!(
+                "{}: not every camera has a background plate <camera>.png; background subtraction is unavailable",
+                bg_dir.display()
+            ));
+        }
+        let seq = Sequence {
+            dir: dir.to_path_buf(),
+            cameras,
+            frames: all.into_iter().collect(),
+            frame_ext,
+            has_masks,
+            has_backgrounds,
+            warnings,
+        };
+        seq.check_image_sizes()?;
+        Ok(seq)
+    }
+
+    /// Opens the sequence `data_dir/<name>` with the calibration file `calib_path`.
+    pub fn open_with_calibration(calib_path: &Path, dir: &Path) -> Result<Sequence> {
+        let cameras = crate::camera::read_cameras(calib_path)?;
+        Sequence::open(dir, cameras, calib_path)
+    }
+
+    /// Checks every frame's, mask's and plate's header against the calibration.
+    fn check_image_sizes(&self) -> Result<()> {
+        use rayon::prelude::*;
+        let mut jobs: Vec<(usize, PathBuf)> = Vec::new();
+        for (c, cam) in self.cameras.iter().enumerate() {
+            for &f in &self.frames {
+                jobs.push((c, self.frame_path(c, f)));
+                if self.has_masks {
+                    jobs.push((c, self.mask_path(c, f)));
+                }
+            }
+            if self.has_backgrounds {
+                jobs.push((c, self.background_path(c)));
+            }
+            let _ = cam;
+        }
+        jobs.par_iter().try_for_each(|(c, path)| {
+            if !path.is_file() {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "missing file for camera '{}'; when masks/ exists every camera needs every frame's mask",
+                        self.cameras[*c].name
+                    ),
+                ));
+            }
+            let (w, h) = image_dimensions(path)?;
+            check_size(path, &self.cameras[*c], w, h)
+        })
+    }
+
+    /// The sequence name (its folder name).
+    pub fn name(&self) -> String {
+        self.dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    }
+
+    /// Path of camera `cam`'s frame `frame`.
+    pub fn frame_path(&self, cam: usize, frame: u32) -> PathBuf {
+        self.dir
+            .join("frames")
+            .join(&self.cameras[cam].name)
+            .join(format!("{}.{}", frame_stem(frame), self.frame_ext[cam]))
+    }
+
+    /// Path of camera `cam`'s given mask of frame `frame`.
+    pub fn mask_path(&self, cam: usize, frame: u32) -> PathBuf {
+        self.dir
+            .join("masks")
+            .join(&self.cameras[cam].name)
+            .join(format!("{}.png", frame_stem(frame)))
+    }
+
+    /// Path of camera `cam`'s background plate.
+    pub fn background_path(&self, cam: usize) -> PathBuf {
+        self.dir
+            .join("background")
+            .join(format!("{}.png", self.cameras[cam].name))
+    }
+
+    fn load_rgb(&self, cam: usize, path: &Path) -> Result<RgbImage> {
+        let img = decode(path)?.to_rgb8();
+        check_size(path, &self.cameras[cam], img.width(), img.height())?;
+        Ok(img)
+    }
+
+    /// Loads camera `cam`'s frame `frame` as 8-bit RGB.
+    pub fn load_frame(&self, cam: usize, frame: u32) -> Result<RgbImage> {
+        self.load_rgb(cam, &self.frame_path(cam, frame))
+    }
+
+    /// Loads camera `cam`'s background plate, if the sequence has plates.
+    pub fn load_background(&self, cam: usize) -> Result<Option<RgbImage>> {
+        if !self.has_backgrounds {
+            return Ok(None);
+        }
+        self.load_rgb(cam, &self.background_path(cam)).map(Some)
+    }
+
+    /// Loads camera `cam`'s given mask of frame `frame` as 0/255 (>= 128 is foreground), if
+    /// the sequence has masks.
+    pub fn load_mask(&self, cam: usize, frame: u32) -> Result<Option<GrayImage>> {
+        if !self.has_masks {
+            return Ok(None);
+        }
+        let path = self.mask_path(cam, frame);
+        let mut img = decode(&path)?.to_luma8();
+        check_size(&path, &self.cameras[cam], img.width(), img.height())?;
+        for p in img.pixels_mut() {
+            p.0[0] = if p.0[0] >= 128 { 255 } else { 0 };
+        }
+        Ok(Some(img))
+    }
+
+    /// The skeleton (`skeleton.yaml`), if present.
+    pub fn skeleton(&self) -> Result<Option<Skeleton>> {
+        let path = self.dir.join("skeleton.yaml");
+        if !path.exists() {
+            return Ok(None);
+        }
+        Skeleton::read(&path).map(Some)
+    }
+
+    /// Ground-truth joints (`ground_truth/joints.csv`), if present.
+    pub fn ground_truth_joints(&self) -> Result<Option<Vec<JointRow>>> {
+        let path = self.dir.join("ground_truth").join("joints.csv");
+        if !path.exists() {
+            return Ok(None);
+        }
+        crate::joints::read(&path).map(Some)
+    }
+
+    /// Path of the ground-truth mesh of frame `frame`.
+    pub fn ground_truth_mesh_path(&self, frame: u32) -> PathBuf {
+        self.dir
+            .join("ground_truth")
+            .join("meshes")
+            .join(format!("{}.ply", frame_stem(frame)))
+    }
+
+    /// The ground-truth surface of frame `frame`, if present.
+    pub fn ground_truth_mesh(&self, frame: u32) -> Result<Option<TriMesh>> {
+        let path = self.ground_truth_mesh_path(frame);
+        if !path.exists() {
+            return Ok(None);
+        }
+        crate::geometry::ply::read_ply(&path).map(Some)
+    }
+}

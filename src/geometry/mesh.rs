@@ -1,0 +1,71 @@
+//! Triangle meshes: vertices in metres (world frame), counter-clockwise triangles seen from
+//! outside (so face normals point outwards).
+
+use nalgebra::Vector3;
+
+/// An indexed triangle mesh.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TriMesh {
+    /// Vertex positions, metres.
+    pub vertices: Vec<Vector3<f64>>,
+    /// Triangles as vertex indices, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl TriMesh {
+    /// Area-weighted vertex normals (unit length; zero for isolated vertices).
+    pub fn vertex_normals(&self) -> Vec<Vector3<f64>> {
+        let mut normals = vec![Vector3::zeros(); self.vertices.len()];
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+            // The cross product's length is twice the area: area weighting for free.
+            let n = (b - a).cross(&(c - a));
+            for &i in t {
+                normals[i as usize] += n;
+            }
+        }
+        for n in &mut normals {
+            let len = n.norm();
+            if len > 0.0 {
+                *n /= len;
+            }
+        }
+        normals
+    }
+
+    /// Signed volume enclosed by the mesh (positive when outward oriented), cubic metres.
+    pub fn signed_volume(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+                a.dot(&b.cross(&c)) / 6.0
+            })
+            .sum()
+    }
+
+    /// Axis-aligned bounding box (min, max); `None` for an empty mesh.
+    pub fn bounds(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let first = *self.vertices.first()?;
+        Some(
+            self.vertices
+                .iter()
+                .fold((first, first), |(lo, hi), v| (lo.inf(v), hi.sup(v))),
+        )
+    }
+
+    /// Whether every edge is shared by exactly two triangles with opposite directions
+    /// (a closed, consistently oriented 2-manifold surface).
+    pub fn is_watertight(&self) -> bool {
+        use std::collections::HashMap;
+        let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in &self.triangles {
+            for k in 0..3 {
+                *directed.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+            }
+        }
+        directed
+            .iter()
+            .all(|(&(a, b), &n)| n == 1 && directed.get(&(b, a)) == Some(&1))
+    }
+}

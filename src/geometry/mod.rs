@@ -1,0 +1,7 @@
+//! Geometry: triangle meshes and their file formats, iso-surface extraction.
+
+pub mod isosurface;
+pub mod mesh;
+pub mod ply;
+
+pub use mesh::TriMesh;

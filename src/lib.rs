@@ -1,0 +1,19 @@
+//! hullpose: multi-view capture to visual hulls, refined surfaces, and the motion of an
+//! articulated skeleton, robust to contact and to unobservable surface.
+//!
+//! The stages follow `method.md`: silhouettes, visual hull, graph-cut refinement, ZNCC
+//! reliability, skin-bone model, robust articulated fitting, and exports.
+
+pub mod camera;
+pub mod config;
+pub mod dataset;
+pub mod error;
+pub mod fsutil;
+pub mod geometry;
+pub mod imageio;
+pub mod joints;
+pub mod skeleton;
+pub mod synth;
+pub mod yaml;
+
+pub use error::{Error, Result};

@@ -1,0 +1,168 @@
+//! The skeleton as `skeleton.yaml` declares it: bones with heads and tails at the reference
+//! frame t0, parents listed first (`shared/dataset-format.md`).
+
+use crate::error::{Error, Result};
+use nalgebra::Vector3;
+use serde::Deserialize;
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One bone at the reference frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bone {
+    /// Unique bone name.
+    pub name: String,
+    /// Index of the parent bone in [`Skeleton::bones`]; `None` for the root.
+    pub parent: Option<usize>,
+    /// Head (the point the bone rotates about), world metres at t0.
+    pub head: Vector3<f64>,
+    /// Tail, world metres at t0.
+    pub tail: Vector3<f64>,
+}
+
+impl Bone {
+    /// Bone length, metres.
+    pub fn length(&self) -> f64 {
+        (self.tail - self.head).norm()
+    }
+}
+
+/// The articulated structure embedded in the subject at the reference frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Skeleton {
+    /// The frame index t0 whose reconstruction becomes the body model.
+    pub reference_frame: u32,
+    /// Bones, parents before children; exactly one root (the first bone).
+    pub bones: Vec<Bone>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SkeletonFile {
+    reference_frame: u32,
+    bones: Vec<BoneEntry>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BoneEntry {
+    name: String,
+    parent: Option<String>,
+    head: [f64; 3],
+    tail: [f64; 3],
+}
+
+impl Skeleton {
+    /// Number of pose parameters: 6 for the root, 3 for every other bone.
+    pub fn parameter_count(&self) -> usize {
+        3 * self.bones.len() + 3
+    }
+
+    /// Index of the bone named `name`.
+    pub fn bone_index(&self, name: &str) -> Option<usize> {
+        self.bones.iter().position(|b| b.name == name)
+    }
+
+    /// Children of each bone.
+    pub fn children(&self) -> Vec<Vec<usize>> {
+        let mut c = vec![Vec::new(); self.bones.len()];
+        for (i, b) in self.bones.iter().enumerate() {
+            if let Some(p) = b.parent {
+                c[p].push(i);
+            }
+        }
+        c
+    }
+
+    /// Parses and validates skeleton.yaml text; `path` names the file in errors.
+    pub fn parse(path: &Path, text: &str) -> Result<Skeleton> {
+        let file: SkeletonFile = crate::yaml::from_str(path, text)?;
+        let bad = |msg: String| Error::invalid(path, msg);
+        if file.bones.is_empty() {
+            return Err(bad("the skeleton has no bone".into()));
+        }
+        let mut index: HashMap<&str, usize> = HashMap::new();
+        let mut bones = Vec::with_capacity(file.bones.len());
+        for (i, e) in file.bones.iter().enumerate() {
+            crate::camera::check_name(&e.name).map_err(|m| bad(format!("bone {i}: {m}")))?;
+            if index.insert(&e.name, i).is_some() {
+                return Err(bad(format!("bone '{}' is declared twice", e.name)));
+            }
+            let parent = match e.parent.as_deref() {
+                None if i == 0 => None,
+                None => {
+                    return Err(bad(format!(
+                        "bone '{}' has no parent, but only the first bone may be the root",
+                        e.name
+                    )))
+                }
+                Some(p) => Some(*index.get(p).ok_or_else(|| {
+                    bad(format!(
+                        "bone '{}' names parent '{p}', which is not declared before it \
+                         (bones must be listed parents first)",
+                        e.name
+                    ))
+                })?),
+            };
+            if i == 0 && parent.is_some() {
+                return Err(bad(format!(
+                    "the first bone '{}' must be the root (parent: null)",
+                    e.name
+                )));
+            }
+            let head = Vector3::from(e.head);
+            let tail = Vector3::from(e.tail);
+            if head.iter().chain(tail.iter()).any(|v| !v.is_finite()) {
+                return Err(bad(format!(
+                    "bone '{}' has a non-finite coordinate",
+                    e.name
+                )));
+            }
+            if (tail - head).norm() < 1e-6 {
+                return Err(bad(format!(
+                    "bone '{}' has zero length (head = tail)",
+                    e.name
+                )));
+            }
+            bones.push(Bone {
+                name: e.name.clone(),
+                parent,
+                head,
+                tail,
+            });
+        }
+        Ok(Skeleton {
+            reference_frame: file.reference_frame,
+            bones,
+        })
+    }
+
+    /// Reads and validates skeleton.yaml.
+    pub fn read(path: &Path) -> Result<Skeleton> {
+        let text = crate::fsutil::read_to_string(path)?;
+        Skeleton::parse(path, &text)
+    }
+
+    /// The skeleton.yaml text (numbers in shortest round-trip form).
+    pub fn to_yaml(&self) -> String {
+        let v = |p: &Vector3<f64>| format!("[{:?}, {:?}, {:?}]", p.x, p.y, p.z);
+        let mut s = format!("reference_frame: {}\nbones:\n", self.reference_frame);
+        for b in &self.bones {
+            let parent = b
+                .parent
+                .map(|p| self.bones[p].name.clone())
+                .unwrap_or_else(|| "null".into());
+            let _ = writeln!(s, "  - name: {}", b.name);
+            let _ = writeln!(s, "    parent: {parent}");
+            let _ = writeln!(s, "    head: {}", v(&b.head));
+            let _ = writeln!(s, "    tail: {}", v(&b.tail));
+        }
+        s
+    }
+
+    /// Writes skeleton.yaml atomically.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        crate::fsutil::write_atomic(path, self.to_yaml().as_bytes())
+    }
+}

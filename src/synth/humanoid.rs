@@ -1,0 +1,444 @@
+//! A human figure (17 bones, 54 pose parameters, 1.8 m tall, facing -y, z up) moving from an
+//! A-pose reference frame through three contact poses: hands on hips, forearms crossed on
+//! the chest, and the right hand on the raised left knee. The legs wear plain trousers (a
+//! nearly uniform colour, where photo-consistency has nothing to lock onto).
+//!
+//! Natural length 24 key frames: A-pose t0; hands on hips t4-t5; A-pose t8; forearms
+//! crossed t12-t13; A-pose t16; hand on knee t20-t21; back towards A-pose by t23.
+
+use super::body::{segment_segment, Body, Pose};
+use super::scene::{self, RingSpec, Scene};
+use crate::skeleton::{Bone, Skeleton};
+use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+
+/// Number of key frames of the motion.
+pub const KEY_FRAMES: usize = 24;
+/// Gap the contact poses aim for between touching parts (slightly pressed), metres.
+const CONTACT_GAP: f64 = -0.003;
+
+/// (name, parent, head, tail, head radius, tail radius, plain material) at the A-pose.
+type BoneDef = (String, Option<String>, [f64; 3], [f64; 3], f64, f64, bool);
+
+fn bone_defs() -> Vec<BoneDef> {
+    let a = std::f64::consts::FRAC_1_SQRT_2;
+    let arm = |s: f64, from: f64, len: f64| -> ([f64; 3], [f64; 3]) {
+        let (x0, z0) = (0.19 + from * a, 1.40 - from * a);
+        ([s * x0, 0.0, z0], [s * (x0 + len * a), 0.0, z0 - len * a])
+    };
+    let def = |name: &str,
+               parent: Option<&str>,
+               h: [f64; 3],
+               t: [f64; 3],
+               r0: f64,
+               r1: f64,
+               plain: bool|
+     -> BoneDef {
+        (
+            name.to_string(),
+            parent.map(str::to_string),
+            h,
+            t,
+            r0,
+            r1,
+            plain,
+        )
+    };
+    let mut defs: Vec<BoneDef> = vec![
+        def(
+            "pelvis",
+            None,
+            [0.0, 0.0, 0.92],
+            [0.0, 0.0, 1.05],
+            0.14,
+            0.13,
+            false,
+        ),
+        def(
+            "spine",
+            Some("pelvis"),
+            [0.0, 0.0, 1.05],
+            [0.0, 0.0, 1.25],
+            0.125,
+            0.13,
+            false,
+        ),
+        def(
+            "chest",
+            Some("spine"),
+            [0.0, 0.0, 1.25],
+            [0.0, 0.0, 1.43],
+            0.145,
+            0.13,
+            false,
+        ),
+        def(
+            "neck",
+            Some("chest"),
+            [0.0, 0.0, 1.43],
+            [0.0, 0.0, 1.54],
+            0.05,
+            0.05,
+            false,
+        ),
+        def(
+            "head",
+            Some("neck"),
+            [0.0, 0.0, 1.54],
+            [0.0, 0.0, 1.72],
+            0.085,
+            0.095,
+            false,
+        ),
+    ];
+    for (s, side) in [(1.0, "l"), (-1.0, "r")] {
+        let n = |base: &str| format!("{base}_{side}");
+        let (h, t) = arm(s, 0.0, 0.28);
+        defs.push(def(&n("upper_arm"), Some("chest"), h, t, 0.05, 0.04, false));
+        let (h, t) = arm(s, 0.28, 0.26);
+        defs.push(def(
+            &n("forearm"),
+            Some(&n("upper_arm")),
+            h,
+            t,
+            0.04,
+            0.03,
+            false,
+        ));
+        let (h, t) = arm(s, 0.54, 0.16);
+        defs.push(def(
+            &n("hand"),
+            Some(&n("forearm")),
+            h,
+            t,
+            0.03,
+            0.028,
+            false,
+        ));
+        defs.push(def(
+            &n("thigh"),
+            Some("pelvis"),
+            [s * 0.10, 0.0, 0.90],
+            [s * 0.14, 0.0, 0.49],
+            0.075,
+            0.05,
+            true,
+        ));
+        defs.push(def(
+            &n("shin"),
+            Some(&n("thigh")),
+            [s * 0.14, 0.0, 0.49],
+            [s * 0.16, 0.0, 0.09],
+            0.05,
+            0.04,
+            true,
+        ));
+        defs.push(def(
+            &n("foot"),
+            Some(&n("shin")),
+            [s * 0.16, 0.0, 0.09],
+            [s * 0.17, -0.16, 0.035],
+            0.04,
+            0.035,
+            false,
+        ));
+    }
+    defs
+}
+
+fn body() -> Body {
+    let defs = bone_defs();
+    let mut bones: Vec<Bone> = Vec::new();
+    for (name, parent, head, tail, ..) in &defs {
+        let parent = parent.as_ref().map(|p| {
+            bones
+                .iter()
+                .position(|b| &b.name == p)
+                .expect("parent first")
+        });
+        bones.push(Bone {
+            name: name.clone(),
+            parent,
+            head: Vector3::from(*head),
+            tail: Vector3::from(*tail),
+        });
+    }
+    Body {
+        skeleton: Skeleton {
+            reference_frame: 0,
+            bones,
+        },
+        radii: defs.iter().map(|d| (d.4, d.5)).collect(),
+        plain: defs.iter().map(|d| d.6).collect(),
+        blend: 0.02,
+    }
+}
+
+/// Poses are built bone by bone from world directions.
+struct PoseBuilder<'a> {
+    body: &'a Body,
+    pose: Pose,
+}
+
+impl<'a> PoseBuilder<'a> {
+    fn new(body: &'a Body) -> Self {
+        PoseBuilder {
+            body,
+            pose: Pose::rest(body.skeleton.bones.len()),
+        }
+    }
+
+    fn bone(&self, name: &str) -> usize {
+        self.body.skeleton.bone_index(name).expect("known bone")
+    }
+
+    /// Sets bone `name`'s world rotation.
+    fn rotate(&mut self, name: &str, r: Rotation3<f64>) {
+        let b = self.bone(name);
+        self.pose.rotations[b] = r;
+    }
+
+    /// Turns bone `name` (minimal rotation from its rest direction) to point along `dir`.
+    fn point(&mut self, name: &str, dir: Vector3<f64>) {
+        let b = self.bone(name);
+        let bone = &self.body.skeleton.bones[b];
+        let rest = (bone.tail - bone.head).normalize();
+        self.pose.rotations[b] = Rotation3::rotation_between(&rest, &dir.normalize())
+            .unwrap_or_else(Rotation3::identity);
+    }
+
+    fn joints(&self) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+        self.body.joints(&self.pose)
+    }
+
+    /// Two-bone IK: places the wrist of side `side`'s arm at `wrist`, the elbow towards
+    /// `pole`, and the hand along `hand_dir`.
+    fn reach(
+        &mut self,
+        side: &str,
+        wrist: Vector3<f64>,
+        pole: Vector3<f64>,
+        hand_dir: Vector3<f64>,
+    ) {
+        let upper = self.bone(&format!("upper_arm_{side}"));
+        let fore = self.bone(&format!("forearm_{side}"));
+        let l1 = self.body.skeleton.bones[upper].length();
+        let l2 = self.body.skeleton.bones[fore].length();
+        let shoulder = self.joints()[upper].0;
+        let to = wrist - shoulder;
+        let d = to.norm().clamp(1e-6, (l1 + l2) * 0.9999);
+        let u = to.normalize();
+        let v = (pole - pole.dot(&u) * u).normalize();
+        let cos_a = ((l1 * l1 + d * d - l2 * l2) / (2.0 * l1 * d)).clamp(-1.0, 1.0);
+        let elbow = shoulder + l1 * (cos_a * u + (1.0 - cos_a * cos_a).sqrt() * v);
+        let wrist = shoulder + d * u;
+        self.point(&format!("upper_arm_{side}"), elbow - shoulder);
+        self.point(&format!("forearm_{side}"), wrist - elbow);
+        self.point(&format!("hand_{side}"), hand_dir);
+    }
+
+    /// Moves the wrist target until the flesh of `part` and `other` is [`CONTACT_GAP`]
+    /// apart, re-solving the arm each time.
+    fn touch(
+        &mut self,
+        side: &str,
+        mut wrist: Vector3<f64>,
+        pole: Vector3<f64>,
+        hand_dir: Vector3<f64>,
+        part: &str,
+        other: &str,
+    ) {
+        let (a, b) = (self.bone(part), self.bone(other));
+        for _ in 0..40 {
+            self.reach(side, wrist, pole, hand_dir);
+            let j = self.joints();
+            let (s, t, _) = segment_segment(&j[a].0, &j[a].1, &j[b].0, &j[b].1);
+            let pa = j[a].0 + s * (j[a].1 - j[a].0);
+            let pb = j[b].0 + t * (j[b].1 - j[b].0);
+            let gap = self.body.flesh_gap(&self.pose, a, b);
+            if (gap - CONTACT_GAP).abs() < 2e-4 {
+                break;
+            }
+            // Move along the line joining the closest axis points.
+            wrist -= (gap - CONTACT_GAP) * (pa - pb).normalize();
+        }
+    }
+}
+
+fn a_pose(body: &Body) -> Pose {
+    Pose::rest(body.skeleton.bones.len())
+}
+
+fn hands_on_hips(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    for (s, side) in [(1.0, "l"), (-1.0, "r")] {
+        p.touch(
+            side,
+            Vector3::new(s * 0.18, -0.01, 1.06),
+            Vector3::new(s, 0.6, 0.0),
+            Vector3::new(0.0, -0.25, -1.0),
+            &format!("hand_{side}"),
+            "pelvis",
+        );
+    }
+    p.pose
+}
+
+fn forearms_crossed(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    // The right forearm lies across the chest; the left crosses over it.
+    p.touch(
+        "r",
+        Vector3::new(0.10, -0.19, 1.26),
+        Vector3::new(-1.0, -0.3, -1.0),
+        Vector3::new(1.0, -0.1, 0.1),
+        "forearm_r",
+        "chest",
+    );
+    let j = p.joints();
+    let fr = p.bone("forearm_r");
+    let over = 0.5 * (j[fr].0 + j[fr].1);
+    p.touch(
+        "l",
+        over + Vector3::new(-0.12, -0.06, 0.05),
+        Vector3::new(1.0, -0.3, -1.0),
+        Vector3::new(-1.0, -0.1, 0.1),
+        "forearm_l",
+        "forearm_r",
+    );
+    p.pose
+}
+
+fn hand_on_knee(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    let lean = |deg: f64| Rotation3::from_axis_angle(&Vector3::x_axis(), deg.to_radians());
+    let twist = Rotation3::from_axis_angle(&Vector3::z_axis(), 25f64.to_radians());
+    p.rotate("spine", lean(12.0));
+    for b in ["chest", "neck", "head"] {
+        p.rotate(b, twist * lean(28.0));
+    }
+    p.point("thigh_l", Vector3::new(0.05, -1.0, 0.05));
+    p.point("shin_l", Vector3::new(0.0, -0.15, -1.0));
+    p.point("foot_l", Vector3::new(0.0, -1.0, -0.3));
+    let j = p.joints();
+    let knee = j[p.bone("shin_l")].0;
+    p.touch(
+        "r",
+        knee + Vector3::new(-0.02, 0.10, 0.09),
+        Vector3::new(-1.0, 0.3, 0.2),
+        Vector3::new(0.05, -1.0, -0.25),
+        "hand_r",
+        "thigh_l",
+    );
+    // The left arm rests on the raised thigh's side.
+    p.point("upper_arm_l", Vector3::new(0.35, -0.2, -1.0));
+    p.point("forearm_l", Vector3::new(0.25, -0.5, -1.0));
+    p.point("hand_l", Vector3::new(0.2, -0.4, -1.0));
+    p.pose
+}
+
+/// Interpolates two poses (per-bone world rotations by slerp, root translation linearly).
+fn blend(a: &Pose, b: &Pose, t: f64) -> Pose {
+    Pose {
+        rotations: a
+            .rotations
+            .iter()
+            .zip(&b.rotations)
+            .map(|(ra, rb)| {
+                let qa = UnitQuaternion::from_rotation_matrix(ra);
+                let qb = UnitQuaternion::from_rotation_matrix(rb);
+                qa.slerp(&qb, t).to_rotation_matrix()
+            })
+            .collect(),
+        root_translation: a.root_translation.lerp(&b.root_translation, t),
+    }
+}
+
+/// Builds the humanoid scene with `frames` frames sampled over the motion.
+pub fn scene(cameras: usize, width: u32, height: u32, frames: usize, seed: u64) -> Scene {
+    let body = body();
+    let bone = |n: &str| body.skeleton.bone_index(n).expect("known bone");
+    let (a, hips, cross, knee) = (
+        a_pose(&body),
+        hands_on_hips(&body),
+        forearms_crossed(&body),
+        hand_on_knee(&body),
+    );
+    let keys: Vec<(f64, &Pose, Vec<(usize, usize)>)> = vec![
+        (0.0, &a, vec![]),
+        (
+            4.0,
+            &hips,
+            vec![
+                (bone("hand_l"), bone("pelvis")),
+                (bone("hand_r"), bone("pelvis")),
+            ],
+        ),
+        (
+            5.0,
+            &hips,
+            vec![
+                (bone("hand_l"), bone("pelvis")),
+                (bone("hand_r"), bone("pelvis")),
+            ],
+        ),
+        (8.0, &a, vec![]),
+        (
+            12.0,
+            &cross,
+            vec![
+                (bone("forearm_r"), bone("chest")),
+                (bone("forearm_l"), bone("forearm_r")),
+            ],
+        ),
+        (
+            13.0,
+            &cross,
+            vec![
+                (bone("forearm_r"), bone("chest")),
+                (bone("forearm_l"), bone("forearm_r")),
+            ],
+        ),
+        (16.0, &a, vec![]),
+        (20.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
+        (21.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
+        (23.0, &a, vec![]),
+    ];
+    let mut poses = Vec::new();
+    let mut contacts = Vec::new();
+    for (f, t) in scene::sample_times(KEY_FRAMES, frames)
+        .into_iter()
+        .enumerate()
+    {
+        let k = keys.iter().rposition(|k| k.0 <= t).unwrap_or(0);
+        if (keys[k].0 - t).abs() < 1e-9 || k + 1 == keys.len() {
+            poses.push(keys[k].1.clone());
+            if (keys[k].0 - t).abs() < 1e-9 {
+                contacts.extend(keys[k].2.iter().map(|&(x, y)| (f as u32, x, y)));
+            }
+        } else {
+            let u = (t - keys[k].0) / (keys[k + 1].0 - keys[k].0);
+            // Ease in and out between key poses.
+            let u = u * u * (3.0 - 2.0 * u);
+            poses.push(blend(keys[k].1, keys[k + 1].1, u));
+        }
+    }
+    let cams = scene::camera_ring(
+        &RingSpec {
+            count: cameras,
+            radius: 4.0,
+            heights: vec![1.2, 1.7, 2.4],
+            target: Vector3::new(0.0, 0.0, 0.95),
+            focal_1024: 1100.0,
+            width,
+            height,
+        },
+        seed,
+    );
+    Scene {
+        name: "humanoid".into(),
+        body,
+        poses,
+        cameras: cams,
+        contacts,
+    }
+}

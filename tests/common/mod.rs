@@ -1,0 +1,258 @@
+//! Helpers shared by the integration tests: synthetic datasets made once per test binary,
+//! plain voxel carving, mesh voxelization, and running the CLI.
+#![allow(dead_code)]
+
+use hullpose::camera::Camera;
+use hullpose::geometry::TriMesh;
+use hullpose::synth::{SceneKind, SynthOptions};
+use nalgebra::{Vector2, Vector3};
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// A dataset written once per test binary into a temporary folder that lives as long as
+/// the process.
+pub struct Made {
+    pub root: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+fn make(scene: SceneKind, width: u32, height: u32) -> Made {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut opts = SynthOptions::new(scene, dir.path());
+    opts.width = width;
+    opts.height = height;
+    hullpose::synth::generate(&opts).expect("synthesis");
+    Made {
+        root: dir.path().to_path_buf(),
+        _dir: dir,
+    }
+}
+
+/// The tripod at the paper's 15 cameras, 512x384 (every test of one binary shares it).
+pub fn tripod() -> &'static Made {
+    static CELL: OnceLock<Made> = OnceLock::new();
+    CELL.get_or_init(|| make(SceneKind::Tripod, 512, 384))
+}
+
+/// The humanoid at 15 cameras, 384x288.
+pub fn humanoid() -> &'static Made {
+    static CELL: OnceLock<Made> = OnceLock::new();
+    CELL.get_or_init(|| make(SceneKind::Humanoid, 384, 288))
+}
+
+/// A voxel grid over a box: `dims` voxels of `size` metres from `lo` (voxel centres at
+/// lo + size * (i + 0.5)).
+#[derive(Clone)]
+pub struct Grid {
+    pub lo: Vector3<f64>,
+    pub size: f64,
+    pub dims: [usize; 3],
+}
+
+impl Grid {
+    pub fn around(mesh: &TriMesh, margin: f64, size: f64) -> Grid {
+        let (lo, hi) = mesh.bounds().unwrap();
+        let lo = lo - Vector3::repeat(margin);
+        let hi = hi + Vector3::repeat(margin);
+        let dims = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / size).ceil() as usize);
+        Grid { lo, size, dims }
+    }
+    pub fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+    pub fn index(&self, x: usize, y: usize, z: usize) -> usize {
+        x + self.dims[0] * (y + self.dims[1] * z)
+    }
+    pub fn coords(&self, i: usize) -> [usize; 3] {
+        [
+            i % self.dims[0],
+            (i / self.dims[0]) % self.dims[1],
+            i / (self.dims[0] * self.dims[1]),
+        ]
+    }
+    pub fn centre(&self, i: usize) -> Vector3<f64> {
+        let c = self.coords(i);
+        self.lo + self.size * Vector3::new(c[0] as f64 + 0.5, c[1] as f64 + 0.5, c[2] as f64 + 0.5)
+    }
+}
+
+/// Plain voxel carving: a voxel stays unless its centre projects, inside some camera's
+/// image, onto background.
+pub fn carve(grid: &Grid, cams: &[Camera], masks: &[image::GrayImage]) -> Vec<bool> {
+    (0..grid.len())
+        .map(|i| {
+            let p = grid.centre(i);
+            cams.iter().zip(masks).all(|(c, m)| match c.project(&p) {
+                Some(px) if c.in_image(&px) => {
+                    let (x, y) = (px.x.round() as u32, px.y.round() as u32);
+                    m.get_pixel(x.min(c.width - 1), y.min(c.height - 1)).0[0] >= 128
+                }
+                _ => true,
+            })
+        })
+        .collect()
+}
+
+/// Inside/outside of a closed mesh at voxel centres, by ray parity along +z per column.
+pub fn voxelize(grid: &Grid, mesh: &TriMesh) -> Vec<bool> {
+    let [nx, ny, nz] = grid.dims;
+    let mut hits: Vec<Vec<f64>> = vec![Vec::new(); nx * ny];
+    let col = |v: f64, lo: f64| (v - lo) / grid.size - 0.5;
+    for t in &mesh.triangles {
+        let [a, b, d] = t.map(|i| mesh.vertices[i as usize]);
+        let (a2, b2, d2) = (a.xy(), b.xy(), d.xy());
+        let area = (b2 - a2).perp(&(d2 - a2));
+        if area.abs() < 1e-18 {
+            continue;
+        }
+        let xs = [a.x, b.x, d.x].map(|v| col(v, grid.lo.x));
+        let ys = [a.y, b.y, d.y].map(|v| col(v, grid.lo.y));
+        let x0 = xs
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min)
+            .ceil()
+            .max(0.0) as usize;
+        let x1 = (xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max).floor() as i64)
+            .min(nx as i64 - 1);
+        let y0 = ys
+            .iter()
+            .cloned()
+            .fold(f64::INFINITY, f64::min)
+            .ceil()
+            .max(0.0) as usize;
+        let y1 = (ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max).floor() as i64)
+            .min(ny as i64 - 1);
+        for y in y0 as i64..=y1 {
+            for x in x0 as i64..=x1 {
+                let c = grid.centre(grid.index(x as usize, y as usize, 0));
+                let q = Vector2::new(c.x, c.y);
+                let l0 = (b2 - q).perp(&(d2 - q)) / area;
+                let l1 = (d2 - q).perp(&(a2 - q)) / area;
+                let l2 = 1.0 - l0 - l1;
+                if l0 >= 0.0 && l1 >= 0.0 && l2 >= 0.0 {
+                    hits[y as usize * nx + x as usize].push(l0 * a.z + l1 * b.z + l2 * d.z);
+                }
+            }
+        }
+    }
+    let mut inside = vec![false; grid.len()];
+    for y in 0..ny {
+        for x in 0..nx {
+            let h = &mut hits[y * nx + x];
+            h.sort_by(f64::total_cmp);
+            h.dedup_by(|a, b| (*a - *b).abs() < 1e-12);
+            for z in 0..nz {
+                let zc = grid.lo.z + grid.size * (z as f64 + 0.5);
+                inside[grid.index(x, y, z)] = h.iter().filter(|&&v| v < zc).count() % 2 == 1;
+            }
+        }
+    }
+    inside
+}
+
+/// Dilates a voxel set by one voxel (6-neighbourhood).
+pub fn dilate(grid: &Grid, set: &[bool]) -> Vec<bool> {
+    let mut out = set.to_vec();
+    for i in 0..grid.len() {
+        if set[i] {
+            let [x, y, z] = grid.coords(i);
+            for (dx, dy, dz) in [
+                (1i64, 0i64, 0i64),
+                (-1, 0, 0),
+                (0, 1, 0),
+                (0, -1, 0),
+                (0, 0, 1),
+                (0, 0, -1),
+            ] {
+                let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+                if a >= 0
+                    && b >= 0
+                    && c >= 0
+                    && (a as usize) < grid.dims[0]
+                    && (b as usize) < grid.dims[1]
+                    && (c as usize) < grid.dims[2]
+                {
+                    out[grid.index(a as usize, b as usize, c as usize)] = true;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// 6-connected components of a voxel set: lists of voxel indices.
+pub fn components(grid: &Grid, set: &[bool]) -> Vec<Vec<usize>> {
+    let mut seen = vec![false; grid.len()];
+    let mut out = Vec::new();
+    for s in 0..grid.len() {
+        if !set[s] || seen[s] {
+            continue;
+        }
+        let mut comp = vec![s];
+        seen[s] = true;
+        let mut k = 0;
+        while k < comp.len() {
+            let [x, y, z] = grid.coords(comp[k]);
+            k += 1;
+            for (dx, dy, dz) in [
+                (1i64, 0i64, 0i64),
+                (-1, 0, 0),
+                (0, 1, 0),
+                (0, -1, 0),
+                (0, 0, 1),
+                (0, 0, -1),
+            ] {
+                let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+                if a >= 0
+                    && b >= 0
+                    && c >= 0
+                    && (a as usize) < grid.dims[0]
+                    && (b as usize) < grid.dims[1]
+                    && (c as usize) < grid.dims[2]
+                {
+                    let j = grid.index(a as usize, b as usize, c as usize);
+                    if set[j] && !seen[j] {
+                        seen[j] = true;
+                        comp.push(j);
+                    }
+                }
+            }
+        }
+        out.push(comp);
+    }
+    out
+}
+
+/// Path of the built `pipeline` binary.
+pub fn pipeline_bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_pipeline"))
+}
+
+/// Runs `pipeline ARGS` and returns (exit success, stdout, stderr).
+pub fn run_cli(args: &[&str], cwd: &Path) -> (bool, String, String) {
+    let out = std::process::Command::new(pipeline_bin())
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run pipeline");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Copies a folder tree.
+pub fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.path().is_dir() {
+            copy_tree(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
+}
