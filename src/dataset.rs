@@ -45,7 +45,12 @@ pub fn image_dimensions(path: &Path) -> Result<(u32, u32)> {
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?
         .into_dimensions()
-        .map_err(|e| Error::invalid(path, format!("cannot read the image: {e}")))
+        .map_err(|e| {
+            Error::invalid(
+                path,
+                format!("cannot read the image (damaged, or not a PNG/JPEG): {e}"),
+            )
+        })
 }
 
 fn decode(path: &Path) -> Result<image::DynamicImage> {

@@ -80,3 +80,111 @@ fn tripod_hull_has_phantom_beneath_hub_on_phantom_frames_only() {
     }
     eprintln!("{}", report.join("\n"));
 }
+
+/// Dominant bone of every rest vertex (frame 0's true mesh): the bone whose segment is
+/// nearest. Frames share vertex order, so the labels hold for every frame.
+fn labels(seq: &Sequence) -> Vec<usize> {
+    let skel = seq.skeleton().unwrap().unwrap();
+    let rest = seq
+        .ground_truth_mesh(skel.reference_frame)
+        .unwrap()
+        .unwrap();
+    rest.vertices
+        .iter()
+        .map(|v| {
+            (0..skel.bones.len())
+                .min_by(|&a, &b| {
+                    let d = |i: usize| {
+                        hullpose::synth::body::segment_distance(
+                            v,
+                            &skel.bones[i].head,
+                            &skel.bones[i].tail,
+                        )
+                        .1
+                    };
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap()
+        })
+        .collect()
+}
+
+/// Smallest distance between vertices of part `a` and part `b` of frame `frame`, metres.
+fn part_distance(seq: &Sequence, labels: &[usize], frame: u32, a: &str, b: &str) -> f64 {
+    let skel = seq.skeleton().unwrap().unwrap();
+    let (ia, ib) = (skel.bone_index(a).unwrap(), skel.bone_index(b).unwrap());
+    let mesh = seq.ground_truth_mesh(frame).unwrap().unwrap();
+    let pa: Vec<_> = mesh
+        .vertices
+        .iter()
+        .zip(labels)
+        .filter(|(_, &l)| l == ia)
+        .map(|(v, _)| *v)
+        .collect();
+    let pb: Vec<_> = mesh
+        .vertices
+        .iter()
+        .zip(labels)
+        .filter(|(_, &l)| l == ib)
+        .map(|(v, _)| *v)
+        .collect();
+    assert!(
+        !pa.is_empty() && !pb.is_empty(),
+        "parts {a} and {b} have vertices"
+    );
+    pa.iter()
+        .flat_map(|p| pb.iter().map(move |q| (p - q).norm()))
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn tripod_arm_tips_touch_on_t9_and_t10() {
+    let seq = open(&tripod().root, "tripod");
+    let labels = labels(&seq);
+    for (a, b) in [
+        ("arm0_lower", "arm1_lower"),
+        ("arm1_lower", "arm2_lower"),
+        ("arm0_lower", "arm2_lower"),
+    ] {
+        for f in [9, 10] {
+            let d = part_distance(&seq, &labels, f, a, b);
+            assert!(d <= 0.01, "t{f}: {a} and {b} are {:.1} cm apart", d * 100.0);
+        }
+        for f in [0, 6] {
+            let d = part_distance(&seq, &labels, f, a, b);
+            assert!(
+                d > 0.05,
+                "t{f}: {a} and {b} must be apart, {:.1} cm",
+                d * 100.0
+            );
+        }
+    }
+}
+
+#[test]
+fn humanoid_parts_touch_on_contact_frames_and_not_at_t0() {
+    let seq = open(&humanoid().root, "humanoid");
+    let labels = labels(&seq);
+    let contacts = [
+        (4, "hand_l", "pelvis"),
+        (5, "hand_r", "pelvis"),
+        (12, "forearm_r", "chest"),
+        (13, "forearm_l", "forearm_r"),
+        (20, "hand_r", "thigh_l"),
+        (21, "hand_r", "thigh_l"),
+    ];
+    for (f, a, b) in contacts {
+        let d = part_distance(&seq, &labels, f, a, b);
+        assert!(
+            d <= 0.01,
+            "t{f}: {a} and {b} should touch but are {:.1} cm apart",
+            d * 100.0
+        );
+        let d0 = part_distance(&seq, &labels, 0, a, b);
+        assert!(
+            d0 > 0.05,
+            "t0: {a} and {b} should be apart but are {:.1} cm apart",
+            d0 * 100.0
+        );
+    }
+}
