@@ -16,6 +16,10 @@ use std::path::Path;
 
 /// Tolerance on `R·Rᵀ = I` and `det R = 1` when a calibration is loaded.
 pub const ROTATION_TOLERANCE: f64 = 1e-6;
+/// Deviation up to which an R that misses [`ROTATION_TOLERANCE`] is taken as a rotation
+/// printed with too few digits (published calibrations often carry 10 significant digits,
+/// about 1e-6 off): it is replaced by the nearest rotation, with a warning.
+pub const ROUNDED_ROTATION_TOLERANCE: f64 = 1e-4;
 
 /// One calibrated camera.
 #[derive(Debug, Clone, PartialEq)]
@@ -237,6 +241,29 @@ impl Camera {
     }
 }
 
+/// How far `r` is from a rotation: the larger of max |R·Rᵀ - I| and |det R - 1|.
+pub fn rotation_deviation(r: &Matrix3<f64>) -> f64 {
+    let ortho = (r * r.transpose() - Matrix3::identity()).abs().max();
+    ortho.max((r.determinant() - 1.0).abs())
+}
+
+/// The rotation nearest to `r` (Frobenius norm), from its SVD.
+pub fn nearest_rotation(r: &Matrix3<f64>) -> Matrix3<f64> {
+    let svd = r.svd(true, true);
+    let (u, v_t) = (svd.u.expect("u"), svd.v_t.expect("v_t"));
+    let mut fix = Matrix3::identity();
+    fix[(2, 2)] = (u * v_t).determinant().signum();
+    u * fix * v_t
+}
+
+/// A calibration as read from cameras.yaml.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    pub cameras: Vec<Camera>,
+    /// Repairs made on load (rotations printed with too few digits).
+    pub warnings: Vec<String>,
+}
+
 /// Camera names become folder names: refuse anything that is not a plain file name.
 pub fn check_name(name: &str) -> std::result::Result<(), String> {
     if name.is_empty() {
@@ -274,12 +301,13 @@ struct CameraEntry {
 }
 
 /// Parses cameras.yaml text (`path` only names the file in errors) and validates it.
-pub fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
+pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
     let file: CamerasFile = crate::yaml::from_str(path, text)?;
     if file.cameras.is_empty() {
         return Err(Error::invalid(path, "the calibration lists no camera"));
     }
     let mut seen = HashSet::new();
+    let mut warnings = Vec::new();
     let mut cameras = Vec::with_capacity(file.cameras.len());
     for e in file.cameras {
         let bad = |msg: String| Error::invalid(path, format!("camera '{}': {msg}", e.name));
@@ -309,7 +337,7 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
                 )))
             }
         };
-        let cam = Camera {
+        let mut cam = Camera {
             name: e.name.clone(),
             width: e.width,
             height: e.height,
@@ -322,14 +350,24 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Vec<Camera>> {
             r: Matrix3::from_fn(|i, j| e.R[i][j]),
             t: Vector3::new(e.t[0], e.t[1], e.t[2]),
         };
+        let deviation = rotation_deviation(&cam.r);
+        if deviation > ROTATION_TOLERANCE && deviation <= ROUNDED_ROTATION_TOLERANCE {
+            cam.r = nearest_rotation(&cam.r);
+            warnings.push(format!(
+                "{}: camera '{}': R is {deviation:.1e} from a rotation (too few printed digits?); \
+                 using the nearest rotation",
+                path.display(),
+                e.name
+            ));
+        }
         cam.validate().map_err(&bad)?;
         cameras.push(cam);
     }
-    Ok(cameras)
+    Ok(Calibration { cameras, warnings })
 }
 
 /// Reads and validates `calib/cameras.yaml`.
-pub fn read_cameras(path: &Path) -> Result<Vec<Camera>> {
+pub fn read_cameras(path: &Path) -> Result<Calibration> {
     let text = crate::fsutil::read_to_string(path)?;
     parse_cameras(path, &text)
 }
@@ -425,5 +463,34 @@ mod tests {
         let up = c.project(&Vector3::new(0.0, 0.0, 1.2)).unwrap();
         assert!(up.y < px.y);
         assert!(c.validate().is_ok());
+    }
+
+    fn yaml_with_r(r: [[f64; 3]; 3]) -> String {
+        format!(
+            "cameras:\n  - name: a\n    width: 4\n    height: 3\n    K: [[2.0, 0.0, 1.5], [0.0, 2.0, 1.0], [0.0, 0.0, 1.0]]\n    R: {r:?}\n    t: [0.0, 0.0, 1.0]\n"
+        )
+    }
+
+    #[test]
+    fn rotations_printed_with_few_digits_are_repaired_and_wrong_ones_refused() {
+        let c = 0.6;
+        let s = 0.8000021; // 2.1e-6 off
+        let calib = parse_cameras(
+            Path::new("c.yaml"),
+            &yaml_with_r([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]),
+        )
+        .unwrap();
+        assert_eq!(calib.warnings.len(), 1);
+        assert!(rotation_deviation(&calib.cameras[0].r) < 1e-12);
+        let err = parse_cameras(
+            Path::new("c.yaml"),
+            &yaml_with_r([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("c.yaml") && err.contains("camera 'a'") && err.contains("not a rotation"),
+            "{err}"
+        );
     }
 }

@@ -202,8 +202,10 @@ impl Sequence {
 
     /// Opens the sequence `data_dir/<name>` with the calibration file `calib_path`.
     pub fn open_with_calibration(calib_path: &Path, dir: &Path) -> Result<Sequence> {
-        let cameras = crate::camera::read_cameras(calib_path)?;
-        Sequence::open(dir, cameras, calib_path)
+        let calib = crate::camera::read_cameras(calib_path)?;
+        let mut seq = Sequence::open(dir, calib.cameras, calib_path)?;
+        seq.warnings.splice(0..0, calib.warnings);
+        Ok(seq)
     }
 
     /// Checks every frame's, mask's and plate's header against the calibration.

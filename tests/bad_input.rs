@@ -70,7 +70,7 @@ fn frame_missing_in_one_camera() {
 fn calibration_whose_r_is_not_a_rotation() {
     let err = check_fails(|d| {
         let path = d.join("calib/cameras.yaml");
-        let mut cams = hullpose::camera::read_cameras(&path).unwrap();
+        let mut cams = hullpose::camera::read_cameras(&path).unwrap().cameras;
         cams[1].r *= 1.01; // a scaled rotation: not orthonormal
         std::fs::write(&path, hullpose::camera::cameras_to_yaml(&cams)).unwrap();
     });

@@ -162,10 +162,14 @@ fn projection_is_opencvs_formula_and_backprojection_inverts_it() {
 #[test]
 fn calibration_and_skeleton_round_trip_exactly() {
     let root = &tripod().root;
-    let cams = camera::read_cameras(&root.join("calib/cameras.yaml")).unwrap();
+    let cams = camera::read_cameras(&root.join("calib/cameras.yaml"))
+        .unwrap()
+        .cameras;
     let text = camera::cameras_to_yaml(&cams);
     assert_eq!(
-        camera::parse_cameras(Path::new("x.yaml"), &text).unwrap(),
+        camera::parse_cameras(Path::new("x.yaml"), &text)
+            .unwrap()
+            .cameras,
         cams
     );
     let skel = Skeleton::read(&root.join("data/tripod/skeleton.yaml")).unwrap();

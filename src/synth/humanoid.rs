@@ -353,6 +353,9 @@ fn blend(a: &Pose, b: &Pose, t: f64) -> Pose {
     }
 }
 
+/// A key pose: its time (key frames), the pose, and the bone pairs meant to touch.
+type Key<'a> = (f64, &'a Pose, Vec<(usize, usize)>);
+
 /// Builds the humanoid scene with `frames` frames sampled over the motion.
 pub fn scene(cameras: usize, width: u32, height: u32, frames: usize, seed: u64) -> Scene {
     let body = body();
@@ -363,7 +366,7 @@ pub fn scene(cameras: usize, width: u32, height: u32, frames: usize, seed: u64) 
         forearms_crossed(&body),
         hand_on_knee(&body),
     );
-    let keys: Vec<(f64, &Pose, Vec<(usize, usize)>)> = vec![
+    let keys: Vec<Key> = vec![
         (0.0, &a, vec![]),
         (
             4.0,

@@ -230,9 +230,9 @@ pub fn render_frame(
 pub fn render_background(view: &CameraView, w: u32, h: u32, seed: u64, stream: u64) -> RgbImage {
     let mut img = RgbImage::new(w, h);
     let mut rng = Rng::new(seed, stream);
-    for (i, px) in img.as_mut().chunks_exact_mut(3).enumerate() {
-        for k in 0..3 {
-            px[k] = to_u8(view.room[i][k], view.gain, view.offset, &mut rng);
+    for (px, room) in img.as_mut().chunks_exact_mut(3).zip(&view.room) {
+        for (out, &v) in px.iter_mut().zip(room.iter()) {
+            *out = to_u8(v, view.gain, view.offset, &mut rng);
         }
     }
     img

@@ -154,8 +154,8 @@ pub fn voxelize(grid: &Grid, mesh: &TriMesh) -> Vec<bool> {
 /// Dilates a voxel set by one voxel (6-neighbourhood).
 pub fn dilate(grid: &Grid, set: &[bool]) -> Vec<bool> {
     let mut out = set.to_vec();
-    for i in 0..grid.len() {
-        if set[i] {
+    for (i, _) in set.iter().enumerate().filter(|(_, &inside)| inside) {
+        {
             let [x, y, z] = grid.coords(i);
             for (dx, dy, dz) in [
                 (1i64, 0i64, 0i64),

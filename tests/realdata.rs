@@ -1,0 +1,93 @@
+//! Real captures (Middlebury dino and temple rings, in ../shared/realdata): the calibrations
+//! load (the dino's rotations, printed with 10 digits, are repaired with a warning) and the
+//! object seen in every view lies inside the projection of the published bounding box.
+
+use hullpose::dataset::Sequence;
+use nalgebra::Vector3;
+use std::path::PathBuf;
+
+fn realdata() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/realdata/middlebury")
+}
+
+fn check(set: &str, lo: [f64; 3], hi: [f64; 3], repaired: bool) {
+    let root = realdata().join(set);
+    if !root.exists() {
+        eprintln!("skipped: {} is not present", root.display());
+        return;
+    }
+    let seq = Sequence::open_with_calibration(
+        &root.join("calib/cameras.yaml"),
+        &root.join("data/static"),
+    )
+    .unwrap();
+    assert_eq!(seq.cameras.len(), 16);
+    assert_eq!(seq.frames, vec![0]);
+    assert_eq!(!seq.warnings.is_empty(), repaired, "{:?}", seq.warnings);
+    // Every bright (object) pixel must fall inside the image rectangle that bounds the
+    // projected corners of the published bounding box (plus 5 px), and the object must
+    // fill a good part of that rectangle.
+    for (c, cam) in seq.cameras.iter().enumerate() {
+        let corners: Vec<_> = (0..8)
+            .map(|k| {
+                let p = Vector3::new(
+                    if k & 1 == 0 { lo[0] } else { hi[0] },
+                    if k & 2 == 0 { lo[1] } else { hi[1] },
+                    if k & 4 == 0 { lo[2] } else { hi[2] },
+                );
+                cam.project(&p).expect("in front of the camera")
+            })
+            .collect();
+        let (x0, x1) = corners
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.x), b.max(p.x)));
+        let (y0, y1) = corners
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.y), b.max(p.y)));
+        let img = seq.load_frame(c, 0).unwrap();
+        let (mut bright, mut inside) = (0usize, 0usize);
+        for (x, y, p) in img.enumerate_pixels() {
+            let lum = p.0.iter().map(|&v| v as u32).sum::<u32>() / 3;
+            if lum > 60 {
+                bright += 1;
+                let (x, y) = (x as f64, y as f64);
+                inside +=
+                    (x >= x0 - 5.0 && x <= x1 + 5.0 && y >= y0 - 5.0 && y <= y1 + 5.0) as usize;
+            }
+        }
+        let share = inside as f64 / bright as f64;
+        let area =
+            (x1.min(cam.width as f64) - x0.max(0.0)) * (y1.min(cam.height as f64) - y0.max(0.0));
+        assert!(
+            share > 0.99,
+            "{}: only {:.1}% of object pixels inside the projected box",
+            cam.name,
+            share * 100.0
+        );
+        assert!(
+            bright as f64 > 0.15 * area,
+            "{}: the object fills the projected box",
+            cam.name
+        );
+    }
+}
+
+#[test]
+fn dino_ring_loads_and_projects_onto_the_object() {
+    check(
+        "dinoSparseRing",
+        [-0.061897, -0.018874, -0.057845],
+        [0.010897, 0.068227, 0.015495],
+        true,
+    );
+}
+
+#[test]
+fn temple_ring_loads_and_projects_onto_the_object() {
+    check(
+        "templeSparseRing",
+        [-0.073568, 0.021728, -0.012445],
+        [0.028855, 0.181892, 0.062736],
+        false,
+    );
+}
