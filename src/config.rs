@@ -2,6 +2,7 @@
 //! file. Unknown keys and wrong types are errors naming the key and the line.
 
 use crate::error::{Error, Result};
+use crate::stages::silhouette::SilhouetteParams;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -45,6 +46,8 @@ struct PipelineFile {
     cache: PathBuf,
     #[serde(default = "default_output")]
     output: PathBuf,
+    #[serde(default)]
+    silhouette: SilhouetteParams,
 }
 
 fn default_cache() -> PathBuf {
@@ -70,6 +73,8 @@ pub struct Config {
     pub cache: PathBuf,
     /// Output folder.
     pub output: PathBuf,
+    /// Stage 1 parameters.
+    pub silhouette: SilhouetteParams,
 }
 
 impl Config {
@@ -91,6 +96,7 @@ impl Config {
             frames,
             cache: base.join(&file.cache),
             output: base.join(&file.output),
+            silhouette: file.silhouette,
         };
         for (key, p, dir) in [
             ("calibration", &config.calibration, false),

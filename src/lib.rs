@@ -4,6 +4,7 @@
 //! The stages follow `method.md`: silhouettes, visual hull, graph-cut refinement, ZNCC
 //! reliability, skin-bone model, robust articulated fitting, and exports.
 
+pub mod cache;
 pub mod camera;
 pub mod config;
 pub mod dataset;
@@ -12,7 +13,9 @@ pub mod fsutil;
 pub mod geometry;
 pub mod imageio;
 pub mod joints;
+pub mod runner;
 pub mod skeleton;
+pub mod stages;
 pub mod synth;
 pub mod yaml;
 

@@ -80,6 +80,11 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
             "--width and --height must be between 16 and 8192".into(),
         ));
     }
+    if !(0.002..=0.1).contains(&opts.mesh_spacing) {
+        return Err(Error::Usage(
+            "--mesh-spacing must be between 0.002 and 0.1 m".into(),
+        ));
+    }
     if opts.frames == Some(0) {
         return Err(Error::Usage("--frames must be at least 1".into()));
     }

@@ -44,14 +44,26 @@ fn contrast(v: f64, gain: f64) -> f64 {
 }
 
 /// The subject's albedo (linear RGB in [0, 1]) at rest-pose point `p` (metres): a
-/// high-contrast, saturated pattern with features at 1.5, 4 and 10 cm, so that patch
-/// correlation finds a clear peak at every scale the pipeline uses.
+/// high-contrast pattern of saturated colours with features at 1.5, 4 and 10 cm, so that
+/// patch correlation finds a clear peak at every scale the pipeline uses. Hue, value and
+/// saturation come from three independent noise fields; saturation stays high, as a
+/// capture subject's costume differs in colour from a studio's grey and wooden backdrop.
 pub fn subject_albedo(p: Vector3<f64>, salt: u64) -> Vector3<f64> {
     let sizes = [0.015, 0.04, 0.10];
-    let r = contrast(octaves(p, &sizes, salt), 7.0);
-    let g = contrast(octaves(p, &sizes, salt + 101), 7.0);
-    let b = contrast(octaves(p, &sizes, salt + 202), 7.0);
-    Vector3::new(0.08 + 0.9 * r, 0.08 + 0.9 * g, 0.08 + 0.9 * b)
+    let hue = (octaves(p, &sizes, salt) - 0.5) * 3.0 + 0.5; // spread over ~1.5 turns
+    let value = 0.25 + 0.7 * contrast(octaves(p, &sizes, salt + 101), 6.0);
+    let sat = 0.7 + 0.3 * contrast(octaves(p, &sizes, salt + 202), 4.0);
+    hsv_to_rgb(hue.rem_euclid(1.0), sat, value)
+}
+
+/// HSV (all in [0, 1]) to RGB.
+fn hsv_to_rgb(h: f64, s: f64, v: f64) -> Vector3<f64> {
+    let h6 = h * 6.0;
+    let f = |n: f64| {
+        let k = (n + h6) % 6.0;
+        v - v * s * (k.min(4.0 - k).clamp(0.0, 1.0))
+    };
+    Vector3::new(f(5.0), f(3.0), f(1.0))
 }
 
 /// A nearly uniform cloth colour (dark blue trousers) with faint low-frequency variation.

@@ -1,0 +1,244 @@
+//! Stage 1, silhouettes (method.md "Stage 1"): given masks pass through; otherwise
+//! background subtraction against the camera's background plate.
+//!
+//! Per pixel, the observed colour I is compared with the plate's colour B in the
+//! brightness/chromaticity model of Horprasert et al. (1999): the brightness ratio
+//! `a = (I·B)/(B·B)` and the chromaticity distortion `cd = |I - a·B|` (8-bit levels). A shadow
+//! or a global brightness change scales B (small `cd`, `a` below or near 1), the subject
+//! changes its colour direction (large `cd`) or its brightness far beyond a shadow. The raw
+//! mask is then cleaned: an opening removes specks, a closing mends one-pixel cracks,
+//! background holes smaller than `max_hole_px` are filled (real gaps, such as between an arm
+//! on the hip and the body, are larger), and only the subject's connected components are
+//! kept (those at least `min_component_fraction` of the largest).
+
+use image::{GrayImage, RgbImage};
+use serde::{Deserialize, Serialize};
+
+/// Where silhouettes come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SilhouetteMethod {
+    /// Given masks when the sequence has them, background subtraction otherwise.
+    Auto,
+    /// Always the given masks (an error when there are none).
+    Masks,
+    /// Always background subtraction (an error without background plates).
+    Background,
+}
+
+/// Parameters of the silhouette stage (pipeline.yaml key `silhouette`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SilhouetteParams {
+    /// Source of the masks: auto, masks or background. Default auto.
+    pub method: SilhouetteMethod,
+    /// Chromaticity distortion above which a pixel is foreground, 8-bit levels. Default 12.
+    pub color_threshold: f64,
+    /// Brightness ratio below which a pixel is foreground even with the background's colour
+    /// (darker than any shadow). Default 0.4.
+    pub min_brightness: f64,
+    /// Brightness ratio above which a pixel is foreground. Default 1.25.
+    pub max_brightness: f64,
+    /// Radius of the speck-removing opening, pixels. Default 1.
+    pub open_radius: u32,
+    /// Radius of the crack-mending closing, pixels. Default 0 (a closing also seals real narrow gaps between limbs).
+    pub close_radius: u32,
+    /// Background regions enclosed by the subject up to this area are filled, pixels at
+    /// 1024x768 (scaled with the image area). Default 60.
+    pub max_hole_px: u32,
+    /// Foreground components smaller than this share of the largest are dropped. Default 0.01.
+    pub min_component_fraction: f64,
+}
+
+impl Default for SilhouetteParams {
+    fn default() -> Self {
+        SilhouetteParams {
+            method: SilhouetteMethod::Auto,
+            color_threshold: 12.0,
+            min_brightness: 0.4,
+            max_brightness: 1.25,
+            open_radius: 1,
+            close_radius: 0,
+            max_hole_px: 60,
+            min_component_fraction: 0.01,
+        }
+    }
+}
+
+/// The raw foreground decision per pixel (true = subject).
+pub fn classify(frame: &RgbImage, background: &RgbImage, p: &SilhouetteParams) -> Vec<bool> {
+    frame
+        .pixels()
+        .zip(background.pixels())
+        .map(|(i, b)| {
+            let i = i.0.map(|v| v as f64);
+            let b = b.0.map(|v| v as f64 + 1.0); // +1 keeps black plates well defined
+            let bb = b[0] * b[0] + b[1] * b[1] + b[2] * b[2];
+            let a = (i[0] * b[0] + i[1] * b[1] + i[2] * b[2]) / bb;
+            let cd =
+                ((i[0] - a * b[0]).powi(2) + (i[1] - a * b[1]).powi(2) + (i[2] - a * b[2]).powi(2))
+                    .sqrt();
+            cd > p.color_threshold || a < p.min_brightness || a > p.max_brightness
+        })
+        .collect()
+}
+
+/// Binary dilation (or erosion) of a w x h mask with a square element of radius r; the
+/// window is clamped at the image border.
+fn morph(mask: &[bool], w: usize, h: usize, r: usize, dilate: bool) -> Vec<bool> {
+    if r == 0 {
+        return mask.to_vec();
+    }
+    // Separable: a pass along rows, then one along columns.
+    let pass = |src: &[bool], horizontal: bool| -> Vec<bool> {
+        let mut out = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let (at, len) = if horizontal { (x, w) } else { (y, h) };
+                let window = at.saturating_sub(r)..=(at + r).min(len - 1);
+                let mut values = window.map(|k| {
+                    if horizontal {
+                        src[y * w + k]
+                    } else {
+                        src[k * w + x]
+                    }
+                });
+                out[y * w + x] = if dilate {
+                    values.any(|v| v)
+                } else {
+                    values.all(|v| v)
+                };
+            }
+        }
+        out
+    };
+    pass(&pass(mask, true), false)
+}
+
+/// Connected components (8-connected when `diagonal`) of pixels equal to `value`:
+/// component id per pixel (u32::MAX for other pixels) and the size of each component.
+fn components(
+    mask: &[bool],
+    w: usize,
+    h: usize,
+    value: bool,
+    diagonal: bool,
+) -> (Vec<u32>, Vec<usize>) {
+    let mut id = vec![u32::MAX; w * h];
+    let mut sizes = Vec::new();
+    let mut stack = Vec::new();
+    for s in 0..w * h {
+        if mask[s] != value || id[s] != u32::MAX {
+            continue;
+        }
+        let c = sizes.len() as u32;
+        let mut size = 0;
+        id[s] = c;
+        stack.push(s);
+        while let Some(p) = stack.pop() {
+            size += 1;
+            let (x, y) = ((p % w) as i64, (p / w) as i64);
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    if (dx == 0 && dy == 0) || (!diagonal && dx != 0 && dy != 0) {
+                        continue;
+                    }
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                        continue;
+                    }
+                    let q = ny as usize * w + nx as usize;
+                    if mask[q] == value && id[q] == u32::MAX {
+                        id[q] = c;
+                        stack.push(q);
+                    }
+                }
+            }
+        }
+        sizes.push(size);
+    }
+    (id, sizes)
+}
+
+/// Cleans a raw mask: opening, closing, small-hole filling, subject components only.
+pub fn clean(raw: &[bool], w: usize, h: usize, p: &SilhouetteParams) -> Vec<bool> {
+    let (o, c) = (p.open_radius as usize, p.close_radius as usize);
+    let opened = morph(&morph(raw, w, h, o, false), w, h, o, true);
+    let mut mask = morph(&morph(&opened, w, h, c, true), w, h, c, false);
+    // Fill enclosed background regions that are small (holes in the subject's texture).
+    let max_hole = (p.max_hole_px as f64 * (w * h) as f64 / (1024.0 * 768.0)).round() as usize;
+    let (bg_id, bg_sizes) = components(&mask, w, h, false, false);
+    let mut touches_border = vec![false; bg_sizes.len()];
+    for x in 0..w {
+        for y in [0, h - 1] {
+            if let Some(t) = touches_border.get_mut(bg_id[y * w + x] as usize) {
+                *t = true;
+            }
+        }
+    }
+    for y in 0..h {
+        for x in [0, w - 1] {
+            if let Some(t) = touches_border.get_mut(bg_id[y * w + x] as usize) {
+                *t = true;
+            }
+        }
+    }
+    for (i, m) in mask.iter_mut().enumerate() {
+        let c = bg_id[i] as usize;
+        if !*m && !touches_border[c] && bg_sizes[c] <= max_hole {
+            *m = true;
+        }
+    }
+    // Keep the subject's components.
+    let (fg_id, fg_sizes) = components(&mask, w, h, true, true);
+    let largest = fg_sizes.iter().copied().max().unwrap_or(0) as f64;
+    for (i, m) in mask.iter_mut().enumerate() {
+        if *m && (fg_sizes[fg_id[i] as usize] as f64) < p.min_component_fraction * largest {
+            *m = false;
+        }
+    }
+    mask
+}
+
+/// Background subtraction: the cleaned silhouette of `frame` against `background`.
+pub fn subtract_background(
+    frame: &RgbImage,
+    background: &RgbImage,
+    p: &SilhouetteParams,
+) -> GrayImage {
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let mask = clean(&classify(frame, background, p), w, h, p);
+    GrayImage::from_raw(
+        w as u32,
+        h as u32,
+        mask.iter().map(|&m| if m { 255 } else { 0 }).collect(),
+    )
+    .expect("sizes match")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shadows_and_brightness_changes_stay_background_colour_changes_do_not() {
+        let bg = RgbImage::from_pixel(40, 30, image::Rgb([120, 100, 80]));
+        let mut frame = bg.clone();
+        for y in 0..30 {
+            for x in 0..40 {
+                let p = frame.get_pixel_mut(x, y);
+                if x < 10 {
+                    p.0 = [66, 55, 44]; // shadow: 0.55 of the plate
+                } else if (20..30).contains(&x) && (10..20).contains(&y) {
+                    p.0 = [40, 160, 60]; // subject
+                } else {
+                    p.0 = [126, 105, 84]; // 5% brighter
+                }
+            }
+        }
+        let m = subtract_background(&frame, &bg, &SilhouetteParams::default());
+        let count = m.pixels().filter(|p| p.0[0] == 255).count();
+        assert_eq!(count, 100);
+        assert_eq!(m.get_pixel(25, 15).0[0], 255);
+    }
+}
