@@ -1,0 +1,311 @@
+//! The cached runner and the silhouette stage: background subtraction against the true
+//! masks, caching behaviour (reuse, parameter changes, SIGKILL, concurrency, disjoint frame
+//! ranges) and bad pipeline input.
+
+mod common;
+
+use common::*;
+use std::path::{Path, PathBuf};
+
+/// A run folder whose pipeline.yaml points at a shared synthetic capture (frames and plates
+/// linked, given masks left out) with its own cache.
+struct RunDir {
+    dir: tempfile::TempDir,
+    truth: PathBuf,
+}
+
+fn run_dir(made: &Made, seq: &str, extra_yaml: &str) -> RunDir {
+    let dir = tempfile::tempdir().unwrap();
+    let src = made.root.join("data").join(seq);
+    let dst = dir.path().join("data").join(seq);
+    std::fs::create_dir_all(&dst).unwrap();
+    for entry in ["frames", "background", "skeleton.yaml"] {
+        std::os::unix::fs::symlink(src.join(entry), dst.join(entry)).unwrap();
+    }
+    std::fs::create_dir_all(dir.path().join("calib")).unwrap();
+    std::fs::copy(
+        made.root.join("calib/cameras.yaml"),
+        dir.path().join("calib/cameras.yaml"),
+    )
+    .unwrap();
+    let yaml = hullpose::config::default_yaml("calib/cameras.yaml", &format!("data/{seq}"));
+    std::fs::write(
+        dir.path().join("pipeline.yaml"),
+        format!("{yaml}{extra_yaml}"),
+    )
+    .unwrap();
+    RunDir {
+        dir,
+        truth: src.join("masks"),
+    }
+}
+
+impl RunDir {
+    fn path(&self) -> &Path {
+        self.dir.path()
+    }
+    fn run(&self, args: &[&str]) -> (bool, String, String) {
+        let mut all = vec!["run", "pipeline.yaml"];
+        all.extend_from_slice(args);
+        run_cli(&all, self.path())
+    }
+    fn manifests(&self) -> usize {
+        std::fs::read_dir(self.path().join("cache/silhouette"))
+            .map(|d| {
+                d.flatten()
+                    .filter(|e| e.file_name().to_string_lossy().ends_with(".manifest.yaml"))
+                    .count()
+            })
+            .unwrap_or(0)
+    }
+}
+
+fn iou_against_truth(rd: &RunDir) -> (f64, String) {
+    let mut worst = (1.0, String::new());
+    let mut count = 0;
+    for frame in std::fs::read_dir(rd.path().join("cache/silhouette"))
+        .unwrap()
+        .flatten()
+    {
+        if !frame.path().is_dir() {
+            continue;
+        }
+        for img in std::fs::read_dir(frame.path()).unwrap().flatten() {
+            let cam = img
+                .path()
+                .file_stem()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            let f = frame.file_name().to_string_lossy().into_owned();
+            let ours = image::open(img.path()).unwrap().to_luma8();
+            let truth = image::open(rd.truth.join(&cam).join(format!("{f}.png")))
+                .unwrap()
+                .to_luma8();
+            let (mut i, mut u) = (0usize, 0usize);
+            for (a, b) in ours.as_raw().iter().zip(truth.as_raw()) {
+                i += (*a >= 128 && *b >= 128) as usize;
+                u += (*a >= 128 || *b >= 128) as usize;
+            }
+            let iou = i as f64 / u.max(1) as f64;
+            count += 1;
+            if iou < worst.0 {
+                worst = (iou, format!("{cam} frame {f}"));
+            }
+        }
+    }
+    assert!(count > 0);
+    worst
+}
+
+#[test]
+fn background_subtraction_matches_the_true_masks_on_both_scenes() {
+    for (made, seq) in [(tripod(), "tripod"), (humanoid(), "humanoid")] {
+        let rd = run_dir(made, seq, "");
+        let (ok, out, err) = rd.run(&[]);
+        assert!(ok, "{err}");
+        assert!(out.contains("silhouette:"), "{out}");
+        let (worst, which) = iou_against_truth(&rd);
+        eprintln!("{seq}: worst IoU {worst:.4} ({which})");
+        assert!(worst >= 0.98, "{seq}: IoU {worst:.4} at {which}");
+    }
+}
+
+#[test]
+fn unchanged_runs_reuse_everything_and_a_parameter_change_reruns_its_stage() {
+    let rd = run_dir(tripod(), "tripod", "");
+    let (ok, out, err) = rd.run(&["--frames", "0..5"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("silhouette: 6 computed, 0 reused"), "{out}");
+    let (_, out, _) = rd.run(&["--frames", "0..5"]);
+    assert!(out.contains("silhouette: 0 computed, 6 reused"), "{out}");
+    assert!(out.contains("0 artifacts computed"), "{out}");
+    let yaml = std::fs::read_to_string(rd.path().join("pipeline.yaml")).unwrap();
+    std::fs::write(
+        rd.path().join("pipeline.yaml"),
+        format!("{yaml}silhouette:\n  color_threshold: 13\n"),
+    )
+    .unwrap();
+    let (_, status, _) = run_cli(&["status", "pipeline.yaml", "--frames", "0..5"], rd.path());
+    assert!(
+        status
+            .lines()
+            .any(|l| l.split_whitespace().collect::<Vec<_>>() == ["silhouette", "0", "6", "0"]),
+        "{status}"
+    );
+    let (_, out, _) = rd.run(&["--frames", "0..5"]);
+    assert!(out.contains("silhouette: 6 computed, 0 reused"), "{out}");
+    // --only re-runs the stage even when it is up to date.
+    let (_, out, _) = rd.run(&["--frames", "2..3", "--only", "silhouette"]);
+    assert!(out.contains("silhouette: 2 computed, 0 reused"), "{out}");
+}
+
+fn artifact_bytes(root: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    for frame in std::fs::read_dir(root.join("cache/silhouette"))
+        .unwrap()
+        .flatten()
+    {
+        if frame.path().is_dir() {
+            for img in std::fs::read_dir(frame.path()).unwrap().flatten() {
+                let name = format!(
+                    "{}/{}",
+                    frame.file_name().to_string_lossy(),
+                    img.file_name().to_string_lossy()
+                );
+                out.push((name, std::fs::read(img.path()).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn a_run_killed_midway_leaves_a_cache_the_next_run_completes() {
+    let rd = run_dir(tripod(), "tripod", "");
+    let mut child = std::process::Command::new(pipeline_bin())
+        .args(["run", "pipeline.yaml"])
+        .current_dir(rd.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while rd.manifests() < 2 && start.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let done = rd.manifests();
+    assert!(
+        (2..19).contains(&done),
+        "killed midway: {done} of 19 frames were done"
+    );
+    let (ok, out, err) = rd.run(&[]);
+    assert!(ok, "{err}");
+    let done_after_kill = rd.manifests();
+    assert_eq!(done_after_kill, 19);
+    assert!(
+        out.contains(&format!("{} computed, {done} reused", 19 - done)),
+        "{out}"
+    );
+    // Every artifact equals an uninterrupted run's.
+    let clean = run_dir(tripod(), "tripod", "");
+    assert!(clean.run(&[]).0);
+    assert!(
+        artifact_bytes(rd.path()) == artifact_bytes(clean.path()),
+        "artifacts differ from a clean run"
+    );
+    let leftovers: Vec<_> = walk(&rd.path().join("cache"))
+        .into_iter()
+        .filter(|p| p.contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+fn walk(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        if e.path().is_dir() {
+            out.extend(walk(&e.path()));
+        } else {
+            out.push(e.path().display().to_string());
+        }
+    }
+    out
+}
+
+#[test]
+fn a_concurrent_run_is_refused() {
+    let rd = run_dir(tripod(), "tripod", "");
+    std::fs::create_dir_all(rd.path().join("cache")).unwrap();
+    let lock = std::fs::File::create(rd.path().join("cache/.lock")).unwrap();
+    lock.lock().unwrap(); // what a running pipeline holds
+    let (ok, _, err) = rd.run(&[]);
+    assert!(!ok);
+    assert!(
+        err.contains("another pipeline run is using this cache"),
+        "{err}"
+    );
+    assert_eq!(rd.manifests(), 0);
+    drop(lock);
+    assert!(
+        rd.run(&["--frames", "0..0"]).0,
+        "runs once the lock is free"
+    );
+}
+
+#[test]
+fn runs_over_disjoint_frame_ranges_fill_one_cache() {
+    let rd = run_dir(tripod(), "tripod", "");
+    assert!(rd.run(&["--frames", "0..9"]).0);
+    assert!(rd.run(&["--frames", "10..18"]).0);
+    let (_, status, _) = run_cli(&["status", "pipeline.yaml"], rd.path());
+    assert!(
+        status
+            .lines()
+            .any(|l| l.split_whitespace().collect::<Vec<_>>() == ["silhouette", "19", "0", "0"]),
+        "{status}"
+    );
+    let (_, out, _) = rd.run(&[]);
+    assert!(out.contains("silhouette: 0 computed, 19 reused"), "{out}");
+}
+
+/// A bad invocation: one clear error line, non-zero exit, no panic, no artifact.
+fn fails_cleanly(rd: &RunDir, args: &[&str]) -> String {
+    let (ok, _, err) = run_cli(args, rd.path());
+    assert!(!ok, "must fail: {args:?}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one error line: {err}");
+    assert_eq!(rd.manifests(), 0, "no artifact");
+    err
+}
+
+#[test]
+fn bad_pipeline_input_gives_clear_errors() {
+    let rd = run_dir(tripod(), "tripod", "silhouette:\n  colour_threshold: 12\n");
+    let err = fails_cleanly(&rd, &["run", "pipeline.yaml"]);
+    assert!(
+        err.contains("pipeline.yaml") && err.contains("colour_threshold") && err.contains("line 9"),
+        "{err}"
+    );
+
+    let rd = run_dir(tripod(), "tripod", "silhouette:\n  color_threshold: high\n");
+    let err = fails_cleanly(&rd, &["run", "pipeline.yaml"]);
+    assert!(
+        err.contains("pipeline.yaml") && err.contains("color_threshold") && err.contains("line 9"),
+        "{err}"
+    );
+
+    let rd = run_dir(tripod(), "tripod", "");
+    let yaml = std::fs::read_to_string(rd.path().join("pipeline.yaml")).unwrap();
+    std::fs::write(
+        rd.path().join("pipeline.yaml"),
+        yaml.replace("data/tripod", "data/nowhere"),
+    )
+    .unwrap();
+    let err = fails_cleanly(&rd, &["run", "pipeline.yaml"]);
+    assert!(
+        err.contains("key 'sequence'")
+            && err.contains("data/nowhere")
+            && err.contains("does not exist"),
+        "{err}"
+    );
+
+    let rd = run_dir(tripod(), "tripod", "");
+    let err = fails_cleanly(&rd, &["run", "pipeline.yaml", "--frames", "30..40"]);
+    assert!(
+        err.contains("30..40") && err.contains("outside the sequence") && err.contains("0..18"),
+        "{err}"
+    );
+
+    let err = fails_cleanly(&rd, &["run", "pipeline.yaml", "--only", "voxels"]);
+    assert!(
+        err.contains("no stage 'voxels'") && err.contains("silhouette"),
+        "{err}"
+    );
+
+    let err = fails_cleanly(&rd, &["run", "missing.yaml"]);
+    assert!(err.contains("missing.yaml"), "{err}");
+}
