@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::stages::silhouette::SilhouetteParams;
+use crate::stages::visual_hull::{self, VisualHullParams};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -48,6 +49,8 @@ struct PipelineFile {
     output: PathBuf,
     #[serde(default)]
     silhouette: SilhouetteParams,
+    #[serde(default)]
+    visual_hull: VisualHullParams,
 }
 
 fn default_cache() -> PathBuf {
@@ -75,6 +78,8 @@ pub struct Config {
     pub output: PathBuf,
     /// Stage 1 parameters.
     pub silhouette: SilhouetteParams,
+    /// Stage 2 parameters.
+    pub visual_hull: VisualHullParams,
 }
 
 impl Config {
@@ -97,7 +102,9 @@ impl Config {
             cache: base.join(&file.cache),
             output: base.join(&file.output),
             silhouette: file.silhouette,
+            visual_hull: file.visual_hull,
         };
+        visual_hull::validate(&config.visual_hull).map_err(|m| Error::invalid(path, m))?;
         for (key, p, dir) in [
             ("calibration", &config.calibration, false),
             ("sequence", &config.sequence, true),

@@ -4,11 +4,13 @@
 //! The stages follow `method.md`: silhouettes, visual hull, graph-cut refinement, ZNCC
 //! reliability, skin-bone model, robust articulated fitting, and exports.
 
+pub mod bench;
 pub mod cache;
 pub mod camera;
 pub mod config;
 pub mod dataset;
 pub mod error;
+pub mod eval;
 pub mod fsutil;
 pub mod geometry;
 pub mod imageio;

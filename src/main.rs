@@ -74,10 +74,44 @@ enum Command {
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
     },
+    /// Compare cached results with the capture's ground truth: reconstruction accuracy
+    /// and completeness per frame and stage (a table, and a CSV under the output folder).
+    Evaluate {
+        /// The pipeline.yaml.
+        file: PathBuf,
+        /// Frames to evaluate, A..B inclusive (overrides pipeline.yaml).
+        #[arg(long, value_name = "A..B", value_parser = parse_range)]
+        frames: Option<FrameRange>,
+    },
+    /// Time the inner steps of a stage (benchmarks; nothing is written).
+    Bench {
+        #[command(subcommand)]
+        what: BenchWhat,
+    },
     /// Check a capture against its calibration and report what it holds.
     Check {
         /// The pipeline.yaml naming the calibration and the sequence.
         file: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchWhat {
+    /// The visual hull's steps on one frame (needs the frame's silhouettes in the cache).
+    VisualHull {
+        file: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        frame: u32,
+        /// Repetitions; the best time is reported.
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+    },
+    /// Iso-surface extraction of a sphere on an N^3 grid.
+    Meshing {
+        #[arg(long, default_value_t = 256)]
+        size: usize,
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
     },
 }
 
@@ -116,6 +150,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     r.seconds,
                     r.location.display()
                 );
+                for w in &r.warnings {
+                    eprintln!("warning: {w}");
+                }
                 computed += r.computed;
                 reused += r.reused;
             }
@@ -127,6 +164,40 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 job.config.output.display()
             );
         }
+        Command::Evaluate { file, frames } => {
+            let job = Job::load(Config::load(&file)?, frames)?;
+            let rows = hullpose::eval::reconstruction(&job)?;
+            print!("{}", hullpose::eval::reconstruction_table(&rows));
+            let csv = job
+                .config
+                .output
+                .join("evaluation")
+                .join("reconstruction.csv");
+            hullpose::fsutil::write_atomic(
+                &csv,
+                hullpose::eval::reconstruction_csv(&rows).as_bytes(),
+            )?;
+            println!("written to {}", csv.display());
+        }
+        Command::Bench { what } => match what {
+            BenchWhat::VisualHull {
+                file,
+                frame,
+                repeat,
+            } => {
+                let job = Job::load(
+                    Config::load(&file)?,
+                    Some(FrameRange {
+                        first: frame,
+                        last: frame,
+                    }),
+                )?;
+                print!("{}", hullpose::bench::visual_hull(&job, frame, repeat)?);
+            }
+            BenchWhat::Meshing { size, repeat } => {
+                print!("{}", hullpose::bench::meshing(size, repeat))
+            }
+        },
         Command::Status { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
             println!(

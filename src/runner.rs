@@ -33,6 +33,8 @@ pub struct StageReport {
     pub reused: usize,
     pub seconds: f64,
     pub location: std::path::PathBuf,
+    /// Warnings the stage raised (e.g. empty frames).
+    pub warnings: Vec<String>,
 }
 
 /// Per-stage status for `pipeline status`.
@@ -187,20 +189,23 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             })
             .collect();
         let progress = bar(todo.len(), stage.name);
-        todo.par_iter().try_for_each(|&f| -> Result<()> {
-            let t = Instant::now();
-            let files = (stage.compute)(&ctx, f)?;
-            job.cache.commit(&Manifest {
-                stage: stage.name.to_string(),
-                frame: f,
-                key: keys[&(stage.name, f)].clone(),
-                format_version: stage.format_version,
-                files,
-                seconds: t.elapsed().as_secs_f64(),
-            })?;
-            progress.inc(1);
-            Ok(())
-        })?;
+        let warnings: Vec<Vec<String>> = todo
+            .par_iter()
+            .map(|&f| -> Result<Vec<String>> {
+                let t = Instant::now();
+                let out = (stage.compute)(&ctx, f)?;
+                job.cache.commit(&Manifest {
+                    stage: stage.name.to_string(),
+                    frame: f,
+                    key: keys[&(stage.name, f)].clone(),
+                    format_version: stage.format_version,
+                    files: out.files,
+                    seconds: t.elapsed().as_secs_f64(),
+                })?;
+                progress.inc(1);
+                Ok(out.warnings)
+            })
+            .collect::<Result<_>>()?;
         progress.finish_and_clear();
         reports.push(StageReport {
             stage: stage.name,
@@ -208,6 +213,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             reused: job.frames.len() - todo.len(),
             seconds: start.elapsed().as_secs_f64(),
             location: job.cache.stage_dir(stage.name),
+            warnings: warnings.into_iter().flatten().collect(),
         });
     }
     Ok(reports)

@@ -1,7 +1,13 @@
-//! Geometry: triangle meshes and their file formats, iso-surface extraction.
+//! Geometry: triangle meshes and their file formats, voxel grids, distance transforms,
+//! iso-surface extraction, smoothing and nearest-point queries.
 
+pub mod distance;
+pub mod grid;
 pub mod isosurface;
 pub mod mesh;
+pub mod obj;
 pub mod ply;
+pub mod smooth;
+pub mod spatial;
 
 pub use mesh::TriMesh;

@@ -5,11 +5,14 @@
 //! [`StageDef`] adapters here do the file handling around them.
 
 pub mod silhouette;
+pub mod visual_hull;
 
 use crate::cache::{Cache, KeyBuilder};
 use crate::config::Config;
 use crate::dataset::{frame_stem, Sequence};
 use crate::error::{Error, Result};
+use crate::geometry::grid::GridSpec;
+use crate::geometry::TriMesh;
 use silhouette::SilhouetteMethod;
 
 /// Everything a stage may read for one run.
@@ -32,21 +35,40 @@ pub struct StageDef {
     pub params: fn(&Config) -> String,
     /// Key material from the raw inputs the stage reads directly for a frame.
     pub sources: fn(&Context, u32, &mut KeyBuilder) -> Result<()>,
-    /// Computes and writes the artifact files of a frame; returns them relative to the
-    /// stage folder.
-    pub compute: fn(&Context, u32) -> Result<Vec<String>>,
+    /// Computes and writes the artifact files of a frame.
+    pub compute: fn(&Context, u32) -> Result<Output>,
+}
+
+/// What a stage wrote for one frame.
+#[derive(Debug, Default)]
+pub struct Output {
+    /// Files, relative to the stage folder.
+    pub files: Vec<String>,
+    /// Things the user should know (e.g. an empty frame).
+    pub warnings: Vec<String>,
 }
 
 /// All stages, in pipeline order.
-pub const STAGES: &[StageDef] = &[StageDef {
-    name: "silhouette",
-    about: "foreground masks: given masks, or background subtraction",
-    inputs: &[],
-    format_version: 1,
-    params: |c| crate::yaml::to_string(&c.silhouette).unwrap_or_default(),
-    sources: silhouette_sources,
-    compute: silhouette_compute,
-}];
+pub const STAGES: &[StageDef] = &[
+    StageDef {
+        name: "silhouette",
+        about: "foreground masks: given masks, or background subtraction",
+        inputs: &[],
+        format_version: 1,
+        params: |c| crate::yaml::to_string(&c.silhouette).unwrap_or_default(),
+        sources: silhouette_sources,
+        compute: silhouette_compute,
+    },
+    StageDef {
+        name: "visual_hull",
+        about: "conservative voxel carving and the hull's watertight mesh",
+        inputs: &["silhouette"],
+        format_version: 1,
+        params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
+        sources: visual_hull_sources,
+        compute: visual_hull_compute,
+    },
+];
 
 /// The stage named `name`, or an error listing the stages.
 pub fn find(name: &str) -> Result<&'static StageDef> {
@@ -97,7 +119,7 @@ fn silhouette_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result
     Ok(())
 }
 
-fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Vec<String>> {
+fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let seq = ctx.sequence;
     let method = resolve_method(ctx)?;
     let dir = ctx.cache.stage_dir("silhouette");
@@ -105,6 +127,9 @@ fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Vec<String>> {
     for c in 0..seq.cameras.len() {
         let mask = match method {
             SilhouetteMethod::Masks => seq.load_mask(c, frame)?.expect("masks present"),
+            SilhouetteMethod::Constant => {
+                silhouette::subtract_constant(&seq.load_frame(c, frame)?, &ctx.config.silhouette)
+            }
             _ => {
                 let img = seq.load_frame(c, frame)?;
                 let bg = seq.load_background(c)?.expect("plates present");
@@ -115,7 +140,68 @@ fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Vec<String>> {
         crate::imageio::write_gray(&dir.join(&rel), &mask)?;
         files.push(rel);
     }
-    Ok(files)
+    Ok(Output {
+        files,
+        warnings: Vec::new(),
+    })
+}
+
+fn visual_hull_sources(ctx: &Context, _frame: u32, key: &mut KeyBuilder) -> Result<()> {
+    key.add_file(&ctx.config.calibration)?;
+    Ok(())
+}
+
+/// Paths of the visual hull's artifacts of a frame, relative to the stage folder.
+pub fn hull_files(frame: u32) -> (String, String) {
+    let stem = frame_stem(frame);
+    (format!("{stem}.ply"), format!("{stem}.grid"))
+}
+
+fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
+    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
+    let masks = load_silhouettes(ctx, frame)?;
+    let p = &ctx.config.visual_hull;
+    let hull = visual_hull::reconstruct(&ctx.sequence.cameras, &masks, p).map_err(|m| {
+        Error::invalid(&ctx.config.path, format!("visual_hull, frame {frame}: {m}"))
+    })?;
+    let dir = ctx.cache.stage_dir("visual_hull");
+    let (ply, grid) = hull_files(frame);
+    let mut warnings = Vec::new();
+    let (mesh, grid_data) = match &hull {
+        Some(h) => (h.mesh.clone(), visual_hull::grid_bytes(&h.grid, &h.sdf)),
+        None => {
+            warnings.push(format!(
+                "frame {frame}: the silhouettes leave no volume (subject out of view?); the hull is empty"
+            ));
+            (
+                TriMesh::default(),
+                visual_hull::grid_bytes(
+                    &GridSpec {
+                        origin: nalgebra::Vector3::zeros(),
+                        voxel: p.voxel_size,
+                        dims: [0, 0, 0],
+                    },
+                    &[],
+                ),
+            )
+        }
+    };
+    let normals = mesh.vertex_normals();
+    let attrs = VertexAttributes {
+        normals: Some(&normals),
+        ..Default::default()
+    };
+    write_ply(
+        &dir.join(&ply),
+        &mesh,
+        &attrs,
+        PlyFormat::BinaryLittleEndian,
+    )?;
+    crate::fsutil::write_atomic(&dir.join(&grid), &grid_data)?;
+    Ok(Output {
+        files: vec![ply, grid],
+        warnings,
+    })
 }
 
 /// Loads the silhouettes of a frame from the cache (for downstream stages and tests).

@@ -24,6 +24,9 @@ pub enum SilhouetteMethod {
     Masks,
     /// Always background subtraction (an error without background plates).
     Background,
+    /// Subtraction of one constant background colour (`background_color`), for captures on
+    /// a uniform backdrop without plates (e.g. objects on black).
+    Constant,
 }
 
 /// Parameters of the silhouette stage (pipeline.yaml key `silhouette`).
@@ -48,6 +51,11 @@ pub struct SilhouetteParams {
     pub max_hole_px: u32,
     /// Foreground components smaller than this share of the largest are dropped. Default 0.01.
     pub min_component_fraction: f64,
+    /// The backdrop's colour for method `constant`, 8-bit RGB. Default [0, 0, 0].
+    pub background_color: [u8; 3],
+    /// Method `constant`: a pixel farther than this from `background_color` (Euclidean RGB
+    /// distance, 8-bit levels) is foreground. Default 48.
+    pub constant_threshold: f64,
 }
 
 impl Default for SilhouetteParams {
@@ -61,6 +69,8 @@ impl Default for SilhouetteParams {
             close_radius: 0,
             max_hole_px: 60,
             min_component_fraction: 0.01,
+            background_color: [0, 0, 0],
+            constant_threshold: 48.0,
         }
     }
 }
@@ -198,6 +208,30 @@ pub fn clean(raw: &[bool], w: usize, h: usize, p: &SilhouetteParams) -> Vec<bool
         }
     }
     mask
+}
+
+/// Constant-colour subtraction: the cleaned silhouette of the pixels farther than
+/// `constant_threshold` from `background_color`.
+pub fn subtract_constant(frame: &RgbImage, p: &SilhouetteParams) -> GrayImage {
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let c = p.background_color.map(|v| v as f64);
+    let raw: Vec<bool> = frame
+        .pixels()
+        .map(|px| {
+            let d2: f64 = (0..3).map(|k| (px.0[k] as f64 - c[k]).powi(2)).sum();
+            d2.sqrt() > p.constant_threshold
+        })
+        .collect();
+    to_image(&clean(&raw, w, h, p), w, h)
+}
+
+fn to_image(mask: &[bool], w: usize, h: usize) -> GrayImage {
+    GrayImage::from_raw(
+        w as u32,
+        h as u32,
+        mask.iter().map(|&m| if m { 255 } else { 0 }).collect(),
+    )
+    .expect("sizes match")
 }
 
 /// Background subtraction: the cleaned silhouette of `frame` against `background`.

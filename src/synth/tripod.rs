@@ -32,21 +32,31 @@ const CURL: [f64; KEY_FRAMES] = [
 /// Curl knots and the bone angles below horizontal at them, degrees (the last lower-bone
 /// angle is solved so that the tips touch).
 const CURL_KNOTS: [f64; 4] = [0.0, 0.5, 0.8, 1.0];
-const UPPER_DEG: [f64; 4] = [0.0, 50.0, 68.0, 72.0];
-const LOWER_DEG: [f64; 3] = [0.0, 70.0, 88.0];
+const UPPER_DEG: [f64; 4] = [30.0, 55.0, 69.0, 72.0];
+const LOWER_DEG: [f64; 3] = [30.0, 72.0, 88.0];
 /// Turn about the vertical axis per key frame, degrees.
 const YAW_PER_FRAME: f64 = 2.0;
 
+/// Angle of the arms below horizontal in the reference frame t0, degrees.
+const REST_DEG: f64 = 30.0;
+
+/// Horizontal direction of arm k.
 fn arm_direction(k: usize) -> Vector3<f64> {
     let az = (90.0 + 120.0 * k as f64).to_radians();
     Vector3::new(az.cos(), az.sin(), 0.0)
+}
+
+/// Direction of arm k at `deg` degrees below horizontal.
+fn arm_direction_down(k: usize, deg: f64) -> Vector3<f64> {
+    let a = deg.to_radians();
+    a.cos() * arm_direction(k) - a.sin() * Vector3::z()
 }
 
 fn body() -> Body {
     let mut bones = Vec::new();
     let mut radii = Vec::new();
     for k in 0..3 {
-        let d = arm_direction(k);
+        let d = arm_direction_down(k, REST_DEG);
         let elbow = HUB + BONE * d;
         bones.push(Bone {
             name: format!("arm{k}_upper"),
@@ -75,15 +85,18 @@ fn body() -> Body {
 }
 
 /// The pose with upper and lower bones bent `upper_deg` and `lower_deg` below horizontal
-/// and the whole object turned by `yaw_deg` about the vertical.
+/// and the whole object turned by `yaw_deg` about the vertical (rotations relative to the
+/// rest pose, whose arms are [`REST_DEG`] below horizontal).
 fn pose(upper_deg: f64, lower_deg: f64, yaw_deg: f64) -> Pose {
     let yaw = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw_deg.to_radians());
     let mut rotations = Vec::new();
     for k in 0..3 {
         // Turning about d x z by a negative angle tips the arm direction d downwards.
         let axis = Unit::new_normalize(arm_direction(k).cross(&Vector3::z()));
-        rotations.push(yaw * Rotation3::from_axis_angle(&axis, -upper_deg.to_radians()));
-        rotations.push(yaw * Rotation3::from_axis_angle(&axis, -lower_deg.to_radians()));
+        rotations
+            .push(yaw * Rotation3::from_axis_angle(&axis, -(upper_deg - REST_DEG).to_radians()));
+        rotations
+            .push(yaw * Rotation3::from_axis_angle(&axis, -(lower_deg - REST_DEG).to_radians()));
     }
     Pose {
         rotations,
@@ -135,7 +148,9 @@ pub fn scene(cameras: usize, width: u32, height: u32, frames: usize, seed: u64) 
         &RingSpec {
             count: cameras,
             radius: 4.0,
-            heights: vec![1.45, 1.95, 2.6],
+            // Below, level with and above the hub (elevations about -13, +12 and +37 degrees
+            // at the ring's radius), so that every surface of the open pose is seen.
+            heights: vec![0.5, 2.3, 4.2],
             target: Vector3::new(0.0, 0.0, 1.0),
             focal_1024: 1150.0,
             width,

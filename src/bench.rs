@@ -1,0 +1,90 @@
+//! `pipeline bench`: timings of the stages' inner steps on real inputs, printed as a
+//! table (benchmarks live here, never in tests).
+
+use crate::error::Result;
+use crate::geometry::isosurface::{self, ScalarGrid};
+use crate::runner::Job;
+use crate::stages::visual_hull::{self, MaskCounts};
+use nalgebra::Vector3;
+use std::time::Instant;
+
+fn best_of<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut best = f64::INFINITY;
+    let mut out = None;
+    for _ in 0..repeat.max(1) {
+        let t = Instant::now();
+        let v = f();
+        best = best.min(t.elapsed().as_secs_f64());
+        out = Some(v);
+    }
+    (best, out.expect("ran once"))
+}
+
+/// Times the visual hull's steps on one frame's cached silhouettes (best of `repeat`).
+pub fn visual_hull(job: &Job, frame: u32, repeat: usize) -> Result<String> {
+    let ctx = crate::stages::Context {
+        config: &job.config,
+        sequence: &job.sequence,
+        cache: &job.cache,
+    };
+    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
+    let cams = &job.sequence.cameras;
+    let p = &job.config.visual_hull;
+    let (t_counts, counts) = best_of(repeat, || {
+        masks.iter().map(MaskCounts::new).collect::<Vec<_>>()
+    });
+    let (t_box, bbox) = best_of(repeat, || visual_hull::carving_box(cams, &counts, p));
+    let (lo, hi) =
+        bbox.ok_or_else(|| crate::Error::Usage(format!("frame {frame} has empty silhouettes")))?;
+    let grid = crate::geometry::grid::GridSpec::covering(lo, hi, p.voxel_size);
+    let (t_carve, occupied) = best_of(repeat, || visual_hull::carve(&grid, cams, &counts, p));
+    let (t_sdf, sdf) = best_of(repeat, || {
+        crate::geometry::distance::signed_distance(&grid, &occupied)
+    });
+    let (t_mesh, mesh) = best_of(repeat, || visual_hull::mesh_sdf(&grid, &sdf));
+    let (t_smooth, _) = best_of(repeat, || {
+        let mut m = mesh.clone();
+        crate::geometry::smooth::taubin(&mut m, p.smoothing_iterations);
+        m
+    });
+    let kept = occupied.iter().filter(|&&o| o).count();
+    Ok(format!(
+        "visual hull, frame {frame}: {} cameras, grid {}x{}x{} ({:.1} M voxels of {} m, {} kept), mesh {} vertices\n\
+         {:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n",
+        cams.len(),
+        grid.dims[0],
+        grid.dims[1],
+        grid.dims[2],
+        grid.len() as f64 / 1e6,
+        grid.voxel,
+        kept,
+        mesh.vertices.len(),
+        "mask summed-area tables",
+        t_counts * 1e3,
+        "bounding box (coarse carve)",
+        t_box * 1e3,
+        "carving (coarse to fine)",
+        t_carve * 1e3,
+        "signed distance",
+        t_sdf * 1e3,
+        "marching tetrahedra",
+        t_mesh * 1e3,
+        "taubin smoothing",
+        t_smooth * 1e3,
+    ))
+}
+
+/// Times iso-surface extraction of a sphere's signed distance on an n^3 grid.
+pub fn meshing(n: usize, repeat: usize) -> String {
+    let h = 1.0 / n as f64;
+    let grid = ScalarGrid::sample(Vector3::zeros(), Vector3::repeat(1.0 - h), h, |p| {
+        (p - Vector3::repeat(0.5)).norm() - 0.35
+    });
+    let (t, mesh) = best_of(repeat, || isosurface::extract(&grid));
+    format!(
+        "marching tetrahedra on a {n}^3 sphere field: {:.1} ms, {} vertices, {} triangles\n",
+        t * 1e3,
+        mesh.vertices.len(),
+        mesh.triangles.len()
+    )
+}

@@ -1,0 +1,158 @@
+//! Evaluation against ground truth: reconstruction accuracy and completeness per frame and
+//! reconstruction stage.
+//!
+//! - accuracy: the distance within which 90% of the reconstructed vertices lie from the true
+//!   surface (metres; the true surface is sampled every 2 mm);
+//! - completeness: the share of points sampled on the true surface that lie inside the
+//!   reconstructed solid or within one voxel of it (from the stage's cached signed distance),
+//!   so a reconstruction that never cuts into the object scores 1.
+
+use crate::error::{Error, Result};
+use crate::geometry::grid::GridSpec;
+use crate::geometry::spatial::PointIndex;
+use crate::geometry::TriMesh;
+use crate::runner::Job;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use std::fmt::Write as _;
+
+/// Points on `mesh`'s surface about `spacing` metres apart (deterministic).
+pub fn sample_surface(mesh: &TriMesh, spacing: f64) -> Vec<Vector3<f64>> {
+    let mut out = Vec::new();
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
+        let area = 0.5 * (b - a).cross(&(c - a)).norm();
+        // n x n barycentric grid with ~area / spacing^2 points.
+        let n = ((2.0 * area).sqrt() / spacing).ceil().max(1.0) as usize;
+        for i in 0..n {
+            for j in 0..n - i {
+                let (u, v) = (
+                    (i as f64 + 1.0 / 3.0) / n as f64,
+                    (j as f64 + 1.0 / 3.0) / n as f64,
+                );
+                out.push(a + u * (b - a) + v * (c - a));
+            }
+        }
+    }
+    out
+}
+
+/// One row of the reconstruction table.
+#[derive(Debug, Clone)]
+pub struct ReconRow {
+    pub frame: u32,
+    pub stage: &'static str,
+    pub vertices: usize,
+    /// Metres.
+    pub accuracy90: f64,
+    /// Share in [0, 1].
+    pub completeness: f64,
+    /// The stage's voxel size, metres.
+    pub voxel: f64,
+}
+
+/// Accuracy and completeness of one reconstruction.
+pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TriMesh) -> (f64, f64) {
+    let samples = sample_surface(truth, 0.002);
+    let index = PointIndex::new(samples, 0.01);
+    let mut d: Vec<f64> = recon
+        .vertices
+        .par_iter()
+        .map(|v| index.nearest(v).map_or(f64::INFINITY, |x| x.1))
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let accuracy90 = if d.is_empty() {
+        f64::INFINITY
+    } else {
+        d[((d.len() as f64 * 0.9).ceil() as usize).clamp(1, d.len()) - 1]
+    };
+    let covered = index
+        .points()
+        .par_iter()
+        .filter(|p| grid.interpolate(sdf, p, f32::INFINITY) as f64 <= grid.voxel)
+        .count();
+    (
+        accuracy90,
+        covered as f64 / index.points().len().max(1) as f64,
+    )
+}
+
+/// Reconstruction stages the evaluation knows: (stage, mesh file, grid file) per frame.
+const RECON_STAGES: &[&str] = &["visual_hull"];
+
+/// Evaluates every cached reconstruction of the job's frames against the true meshes.
+pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
+    let mut rows = Vec::new();
+    let mut any_truth = false;
+    for &frame in &job.frames {
+        let Some(truth) = job.sequence.ground_truth_mesh(frame)? else {
+            continue;
+        };
+        any_truth = true;
+        for &stage in RECON_STAGES {
+            if job.cache.manifest(stage, frame).is_none() {
+                continue;
+            }
+            let dir = job.cache.stage_dir(stage);
+            let (ply, grid_file) = crate::stages::hull_files(frame);
+            let mesh = crate::geometry::ply::read_ply(&dir.join(&ply))?;
+            let path = dir.join(&grid_file);
+            let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            let (grid, sdf) = crate::stages::visual_hull::parse_grid(&path, &data)?;
+            let (accuracy90, completeness) = score(&mesh, &grid, &sdf, &truth);
+            rows.push(ReconRow {
+                frame,
+                stage,
+                vertices: mesh.vertices.len(),
+                accuracy90,
+                completeness,
+                voxel: grid.voxel,
+            });
+        }
+    }
+    if !any_truth {
+        return Err(Error::invalid(
+            job.sequence.dir.join("ground_truth/meshes"),
+            "no ground-truth meshes (NNNNNN.ply) for the selected frames; evaluation needs them",
+        ));
+    }
+    if rows.is_empty() {
+        return Err(Error::Usage(
+            "no reconstruction in the cache yet: run `pipeline run` first".into(),
+        ));
+    }
+    Ok(rows)
+}
+
+/// The CSV text of reconstruction rows.
+pub fn reconstruction_csv(rows: &[ReconRow]) -> String {
+    let mut s = String::from("frame,stage,vertices,accuracy90_m,completeness,voxel_m\n");
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "{},{},{},{:.6},{:.6},{}",
+            r.frame, r.stage, r.vertices, r.accuracy90, r.completeness, r.voxel
+        );
+    }
+    s
+}
+
+/// A printed table of reconstruction rows.
+pub fn reconstruction_table(rows: &[ReconRow]) -> String {
+    let mut s = format!(
+        "{:>6}  {:>12}  {:>9}  {:>13}  {:>12}\n",
+        "frame", "stage", "vertices", "accuracy90 cm", "completeness"
+    );
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "{:>6}  {:>12}  {:>9}  {:>13.2}  {:>11.2}%",
+            r.frame,
+            r.stage,
+            r.vertices,
+            r.accuracy90 * 100.0,
+            r.completeness * 100.0
+        );
+    }
+    s
+}

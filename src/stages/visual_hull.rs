@@ -1,0 +1,531 @@
+//! Stage 2, the visual hull (method.md "Stage 2"): conservative voxel carving, coarse to
+//! fine, then a watertight mesh of the occupancy.
+//!
+//! A voxel stays when its projected footprint (the pixel rectangle bounding the projections
+//! of its eight corners) holds at least one silhouette pixel in every camera whose image its
+//! centre falls in; with `all_but = k`, up to k cameras may disagree. Voxels seen by fewer than
+//! `min_views` cameras are carved. Carving works on blocks of 16^3 voxels first: a block whose
+//! footprint lies inside a camera's image and holds no silhouette pixel is carved whole, a
+//! block whose footprint is all silhouette in every camera that sees it stays whole, and only
+//! the rest is split (octree-style), so the work grows with the surface, not the volume.
+//! Footprint counts come from per-mask summed-area tables.
+//!
+//! The occupancy's signed distance (exact Euclidean distance transform) is meshed with
+//! marching tetrahedra ([`crate::geometry::isosurface`]) and optionally Taubin-smoothed. The
+//! grid and signed distance are kept for the graph-cut stage.
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::geometry::distance::signed_distance;
+use crate::geometry::grid::GridSpec;
+use crate::geometry::isosurface::{self, ScalarGrid};
+use crate::geometry::smooth::taubin;
+use crate::geometry::TriMesh;
+use image::GrayImage;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// An axis-aligned box, metres.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoundingBox {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+/// Parameters of the visual hull stage (pipeline.yaml key `visual_hull`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VisualHullParams {
+    /// Voxel edge length, metres. Default 0.01.
+    pub voxel_size: f64,
+    /// Box to carve, metres; derived per frame from the cameras and silhouettes when absent.
+    pub bbox: Option<BoundingBox>,
+    /// Margin added around the derived box, metres. Default 0.03.
+    pub margin: f64,
+    /// Number of cameras allowed to disagree (all-but-k carving for noisy masks). Default 0.
+    pub all_but: usize,
+    /// Voxels seen by fewer cameras are carved. Default 2.
+    pub min_views: usize,
+    /// Taubin smoothing iterations on the mesh (0: off). Default 10.
+    pub smoothing_iterations: usize,
+    /// Largest grid allowed, megabytes (about 10 bytes per voxel). Default 4096.
+    pub memory_cap_mb: f64,
+}
+
+impl Default for VisualHullParams {
+    fn default() -> Self {
+        VisualHullParams {
+            voxel_size: 0.01,
+            bbox: None,
+            margin: 0.03,
+            all_but: 0,
+            min_views: 2,
+            smoothing_iterations: 10,
+            memory_cap_mb: 4096.0,
+        }
+    }
+}
+
+/// Bytes per voxel the stage needs at its peak (occupancy, two distance fields, the signed
+/// distance, and the iso-surface samples).
+pub const BYTES_PER_VOXEL: f64 = 1.0 + 8.0 + 8.0 + 4.0 + 4.0;
+
+/// A carved frame: grid, occupancy, signed distance (metres, negative inside) and mesh.
+pub struct Hull {
+    pub grid: GridSpec,
+    pub occupied: Vec<bool>,
+    pub sdf: Vec<f32>,
+    pub mesh: TriMesh,
+}
+
+/// Summed-area table of a mask: O(1) counts of silhouette pixels in rectangles.
+pub struct MaskCounts {
+    w: usize,
+    h: usize,
+    sums: Vec<u32>,
+}
+
+impl MaskCounts {
+    pub fn new(mask: &GrayImage) -> MaskCounts {
+        let (w, h) = (mask.width() as usize, mask.height() as usize);
+        let mut sums = vec![0u32; (w + 1) * (h + 1)];
+        for y in 0..h {
+            let mut row = 0u32;
+            for x in 0..w {
+                row += (mask.as_raw()[y * w + x] >= 128) as u32;
+                sums[(y + 1) * (w + 1) + x + 1] = sums[y * (w + 1) + x + 1] + row;
+            }
+        }
+        MaskCounts { w, h, sums }
+    }
+
+    /// Silhouette pixels in the inclusive rectangle [x0, x1] x [y0, y1] (already clipped).
+    fn count(&self, x0: usize, y0: usize, x1: usize, y1: usize) -> u32 {
+        let s = |x: usize, y: usize| self.sums[y * (self.w + 1) + x];
+        s(x1 + 1, y1 + 1) + s(x0, y0) - s(x0, y1 + 1) - s(x1 + 1, y0)
+    }
+
+    /// Whether the mask holds any silhouette pixel.
+    pub fn any(&self) -> bool {
+        self.sums[self.sums.len() - 1] > 0
+    }
+}
+
+/// What one camera says about a box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum View {
+    /// The footprint lies in the image with no silhouette pixel.
+    Empty,
+    /// The footprint lies in the image and is all silhouette.
+    Full,
+    /// The footprint lies in the image, partly silhouette.
+    Partial,
+    /// The footprint lies entirely outside the image: the camera has no say.
+    Unseen,
+    /// Straddles the image border or the camera plane: undecided for a block.
+    Unknown,
+}
+
+/// Classifies the box [lo, hi] in one camera.
+fn view_box(cam: &Camera, counts: &MaskCounts, lo: &Vector3<f64>, hi: &Vector3<f64>) -> View {
+    let (mut u0, mut v0, mut u1, mut v1) = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for k in 0..8 {
+        let p = Vector3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let (px, depth) = cam.project_with_depth(&p);
+        if depth <= 1e-6 {
+            return View::Unknown;
+        }
+        u0 = u0.min(px.x);
+        v0 = v0.min(px.y);
+        u1 = u1.max(px.x);
+        v1 = v1.max(px.y);
+    }
+    // Pixels whose unit squares meet the footprint, half a pixel wider for safety.
+    let (x0, y0) = ((u0 - 0.5).round(), (v0 - 0.5).round());
+    let (x1, y1) = ((u1 + 0.5).round(), (v1 + 0.5).round());
+    let (w, h) = (counts.w as f64, counts.h as f64);
+    if x1 < 0.0 || y1 < 0.0 || x0 > w - 1.0 || y0 > h - 1.0 {
+        return View::Unseen;
+    }
+    if x0 < 0.0 || y0 < 0.0 || x1 > w - 1.0 || y1 > h - 1.0 {
+        return View::Unknown;
+    }
+    let (x0, y0, x1, y1) = (x0 as usize, y0 as usize, x1 as usize, y1 as usize);
+    let n = counts.count(x0, y0, x1, y1);
+    let area = ((x1 - x0 + 1) * (y1 - y0 + 1)) as u32;
+    if n == 0 {
+        View::Empty
+    } else if n == area {
+        View::Full
+    } else {
+        View::Partial
+    }
+}
+
+/// Whether a single voxel stays: the rule of the module doc.
+fn keep_voxel(
+    cams: &[Camera],
+    counts: &[MaskCounts],
+    lo: &Vector3<f64>,
+    hi: &Vector3<f64>,
+    p: &VisualHullParams,
+) -> bool {
+    let centre = (lo + hi) / 2.0;
+    let (mut seen, mut against) = (0usize, 0usize);
+    for (cam, cnt) in cams.iter().zip(counts) {
+        let Some(px) = cam.project(&centre) else {
+            continue;
+        };
+        if !cam.in_image(&px) {
+            continue;
+        }
+        seen += 1;
+        let empty = match view_box(cam, cnt, lo, hi) {
+            View::Empty => true,
+            View::Full | View::Partial | View::Unseen => false,
+            View::Unknown => {
+                // The footprint straddles the border: count within its clipped part.
+                clipped_empty(cam, cnt, lo, hi)
+            }
+        };
+        against += empty as usize;
+        if against > p.all_but {
+            return false;
+        }
+    }
+    seen >= p.min_views
+}
+
+/// For a voxel whose footprint crosses the image border: no silhouette pixel in the part
+/// inside the image.
+fn clipped_empty(cam: &Camera, counts: &MaskCounts, lo: &Vector3<f64>, hi: &Vector3<f64>) -> bool {
+    let (mut u0, mut v0, mut u1, mut v1) = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for k in 0..8 {
+        let q = Vector3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let (px, depth) = cam.project_with_depth(&q);
+        if depth <= 1e-6 {
+            return false;
+        }
+        u0 = u0.min(px.x);
+        v0 = v0.min(px.y);
+        u1 = u1.max(px.x);
+        v1 = v1.max(px.y);
+    }
+    let clamp = |v: f64, n: usize| v.round().clamp(0.0, n as f64 - 1.0) as usize;
+    let (x0, y0) = (clamp(u0 - 0.5, counts.w), clamp(v0 - 0.5, counts.h));
+    let (x1, y1) = (clamp(u1 + 0.5, counts.w), clamp(v1 + 0.5, counts.h));
+    counts.count(x0, y0, x1, y1) == 0
+}
+
+/// Block edge of the coarse level, voxels.
+const BLOCK: usize = 16;
+
+/// Carves the grid: occupancy per voxel.
+pub fn carve(
+    grid: &GridSpec,
+    cams: &[Camera],
+    counts: &[MaskCounts],
+    p: &VisualHullParams,
+) -> Vec<bool> {
+    let [nx, ny, nz] = grid.dims;
+    let blocks: Vec<[usize; 3]> = (0..nz.div_ceil(BLOCK))
+        .flat_map(|bz| {
+            (0..ny.div_ceil(BLOCK))
+                .flat_map(move |by| (0..nx.div_ceil(BLOCK)).map(move |bx| [bx, by, bz]))
+        })
+        .collect();
+    let kept: Vec<Vec<usize>> = blocks
+        .par_iter()
+        .map(|b| {
+            let mut out = Vec::new();
+            refine(
+                grid,
+                cams,
+                counts,
+                p,
+                [b[0] * BLOCK, b[1] * BLOCK, b[2] * BLOCK],
+                BLOCK,
+                &mut out,
+            );
+            out
+        })
+        .collect();
+    let mut occupied = vec![false; grid.len()];
+    for list in kept {
+        for i in list {
+            occupied[i] = true;
+        }
+    }
+    occupied
+}
+
+/// Decides the cube of `size` voxels at voxel `at`, splitting it when undecided; pushes the
+/// indices of kept voxels.
+fn refine(
+    grid: &GridSpec,
+    cams: &[Camera],
+    counts: &[MaskCounts],
+    p: &VisualHullParams,
+    at: [usize; 3],
+    size: usize,
+    out: &mut Vec<usize>,
+) {
+    let end = [0, 1, 2].map(|a| (at[a] + size).min(grid.dims[a]));
+    if (0..3).any(|a| at[a] >= grid.dims[a]) {
+        return;
+    }
+    let lo = grid.origin + grid.voxel * Vector3::new(at[0] as f64, at[1] as f64, at[2] as f64);
+    let hi = grid.origin + grid.voxel * Vector3::new(end[0] as f64, end[1] as f64, end[2] as f64);
+    if size == 1 {
+        if keep_voxel(cams, counts, &lo, &hi, p) {
+            out.push(grid.index(at[0], at[1], at[2]));
+        }
+        return;
+    }
+    let views: Vec<View> = cams
+        .iter()
+        .zip(counts)
+        .map(|(c, n)| view_box(c, n, &lo, &hi))
+        .collect();
+    let empty = views.iter().filter(|&&v| v == View::Empty).count();
+    if empty > p.all_but {
+        return; // every voxel inside is carved by these cameras
+    }
+    let full = views.iter().filter(|&&v| v == View::Full).count();
+    if views.iter().all(|&v| v == View::Full || v == View::Unseen) && full >= p.min_views {
+        for z in at[2]..end[2] {
+            for y in at[1]..end[1] {
+                for x in at[0]..end[0] {
+                    out.push(grid.index(x, y, z));
+                }
+            }
+        }
+        return;
+    }
+    let half = size / 2;
+    for dz in [0, half] {
+        for dy in [0, half] {
+            for dx in [0, half] {
+                refine(
+                    grid,
+                    cams,
+                    counts,
+                    p,
+                    [at[0] + dx, at[1] + dy, at[2] + dz],
+                    half,
+                    out,
+                );
+            }
+        }
+    }
+}
+
+/// Checks the memory a grid needs against the cap.
+pub fn check_memory(grid: &GridSpec, p: &VisualHullParams) -> std::result::Result<(), String> {
+    let mb = grid.len() as f64 * BYTES_PER_VOXEL / 1e6;
+    if mb > p.memory_cap_mb {
+        return Err(format!(
+            "the grid of {}x{}x{} voxels of {} m needs about {mb:.0} MB, over visual_hull.memory_cap_mb = {}; \
+             use a larger voxel_size, a tighter bbox, or raise the cap",
+            grid.dims[0], grid.dims[1], grid.dims[2], grid.voxel, p.memory_cap_mb
+        ));
+    }
+    Ok(())
+}
+
+/// Checks parameters that do not depend on the data.
+pub fn validate(p: &VisualHullParams) -> std::result::Result<(), String> {
+    if !(p.voxel_size > 0.0 && p.voxel_size.is_finite()) {
+        return Err(format!(
+            "visual_hull.voxel_size must be a positive length in metres, got {}",
+            p.voxel_size
+        ));
+    }
+    if let Some(b) = &p.bbox {
+        if (0..3).any(|a| !(b.min[a] < b.max[a])) {
+            return Err(format!(
+                "visual_hull.bbox: min {:?} must be below max {:?} on every axis",
+                b.min, b.max
+            ));
+        }
+    }
+    if p.margin < 0.0 {
+        return Err("visual_hull.margin must not be negative".into());
+    }
+    Ok(())
+}
+
+/// The box to carve: pipeline.yaml's, or derived from a coarse carving of the cube spanned
+/// by the camera centres (cameras surround the subject).
+pub fn carving_box(
+    cams: &[Camera],
+    counts: &[MaskCounts],
+    p: &VisualHullParams,
+) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    if let Some(b) = &p.bbox {
+        return Some((Vector3::from(b.min), Vector3::from(b.max)));
+    }
+    let (mut lo, mut hi) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
+    for c in cams {
+        lo = lo.inf(&c.centre());
+        hi = hi.sup(&c.centre());
+    }
+    let centre = (lo + hi) / 2.0;
+    let half = (hi - lo).max() / 2.0;
+    let coarse = GridSpec::covering(
+        centre - Vector3::repeat(half),
+        centre + Vector3::repeat(half),
+        2.0 * half / 64.0,
+    );
+    let occupied = carve(&coarse, cams, counts, p);
+    let (mut a, mut b) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
+    for (i, _) in occupied.iter().enumerate().filter(|(_, &o)| o) {
+        let [x, y, z] = coarse.coords(i);
+        let v = coarse.origin + coarse.voxel * Vector3::new(x as f64, y as f64, z as f64);
+        a = a.inf(&v);
+        b = b.sup(&(v + Vector3::repeat(coarse.voxel)));
+    }
+    if a.x > b.x {
+        return None;
+    }
+    // The coarse voxels are conservative already; one more coarse voxel and the margin.
+    let pad = Vector3::repeat(coarse.voxel + p.margin);
+    Some((a - pad, b + pad))
+}
+
+/// Carves one frame and meshes it. `None` when the silhouettes leave nothing (an empty
+/// frame). `Err` names the problem for a camera that sees none of the box.
+pub fn reconstruct(
+    cams: &[Camera],
+    masks: &[GrayImage],
+    p: &VisualHullParams,
+) -> std::result::Result<Option<Hull>, String> {
+    validate(p)?;
+    let counts: Vec<MaskCounts> = masks.iter().map(MaskCounts::new).collect();
+    if counts.iter().all(|c| !c.any()) {
+        return Ok(None);
+    }
+    let Some((lo, hi)) = carving_box(cams, &counts, p) else {
+        return Ok(None);
+    };
+    for (cam, cnt) in cams.iter().zip(&counts) {
+        if view_box(cam, cnt, &lo, &hi) == View::Unseen {
+            return Err(format!(
+                "camera '{}' sees none of the reconstruction volume {:?}..{:?}; check its calibration (R, t) or visual_hull.bbox",
+                cam.name,
+                lo.as_slice(),
+                hi.as_slice()
+            ));
+        }
+    }
+    let grid = GridSpec::covering(lo, hi, p.voxel_size);
+    check_memory(&grid, p)?;
+    let occupied = carve(&grid, cams, &counts, p);
+    if !occupied.iter().any(|&o| o) {
+        return Ok(None);
+    }
+    let sdf = signed_distance(&grid, &occupied);
+    let mut mesh = mesh_sdf(&grid, &sdf);
+    taubin(&mut mesh, p.smoothing_iterations);
+    Ok(Some(Hull {
+        grid,
+        occupied,
+        sdf,
+        mesh,
+    }))
+}
+
+/// Meshes the zero level of a signed distance sampled at voxel centres, padded with one
+/// layer of outside samples so the surface is always closed.
+pub fn mesh_sdf(grid: &GridSpec, sdf: &[f32]) -> TriMesh {
+    let [nx, ny, nz] = grid.dims;
+    let dims = [nx + 2, ny + 2, nz + 2];
+    let mut values = vec![grid.voxel as f32; dims[0] * dims[1] * dims[2]];
+    for z in 0..nz {
+        for y in 0..ny {
+            let src = grid.index(0, y, z);
+            let dst = 1 + dims[0] * (y + 1 + dims[1] * (z + 1));
+            values[dst..dst + nx].copy_from_slice(&sdf[src..src + nx]);
+        }
+    }
+    let field = ScalarGrid {
+        dims,
+        origin: grid.origin + Vector3::repeat(-0.5 * grid.voxel),
+        spacing: grid.voxel,
+        values,
+    };
+    isosurface::extract(&field)
+}
+
+/// Binary grid file: magic, dims, origin, voxel size, then the signed distance per voxel.
+const GRID_MAGIC: &[u8; 8] = b"HPGRID01";
+
+/// Serializes a grid and its signed distance (little-endian).
+pub fn grid_bytes(grid: &GridSpec, sdf: &[f32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(64 + 4 * sdf.len());
+    out.extend_from_slice(GRID_MAGIC);
+    for d in grid.dims {
+        out.extend_from_slice(&(d as u64).to_le_bytes());
+    }
+    for v in [grid.origin.x, grid.origin.y, grid.origin.z, grid.voxel] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in sdf {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
+}
+
+/// Reads what [`grid_bytes`] wrote.
+pub fn parse_grid(path: &std::path::Path, data: &[u8]) -> Result<(GridSpec, Vec<f32>)> {
+    let bad = || Error::invalid(path, "not a hullpose grid file (or truncated)");
+    if data.len() < 64 || &data[..8] != GRID_MAGIC {
+        return Err(bad());
+    }
+    let u = |o: usize| u64::from_le_bytes(data[o..o + 8].try_into().unwrap()) as usize;
+    let f = |o: usize| f64::from_le_bytes(data[o..o + 8].try_into().unwrap());
+    let dims = [u(8), u(16), u(24)];
+    let n = dims
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d))
+        .ok_or_else(bad)?;
+    if data.len() != 64 + 4 * n {
+        return Err(bad());
+    }
+    let grid = GridSpec {
+        dims,
+        origin: Vector3::new(f(32), f(40), f(48)),
+        voxel: f(56),
+    };
+    let sdf = data[64..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    Ok((grid, sdf))
+}
