@@ -37,8 +37,9 @@ pub fn write_atomic_with(
         let file = std::fs::File::create(&tmp)?;
         let mut writer = std::io::BufWriter::new(file);
         fill(&mut writer)?;
-        let file = writer.into_inner().map_err(|e| e.into_error())?;
-        file.sync_data()?;
+        // No fsync: the rename makes the write atomic for any interruption of the process
+        // (including SIGKILL); durability across a power loss is not worth its cost here.
+        writer.into_inner().map_err(|e| e.into_error())?;
         std::fs::rename(&tmp, path)
     })();
     if let Err(e) = result {

@@ -41,12 +41,12 @@ fn dt_1d(f: &mut [f64], v: &mut [usize], z: &mut [f64], out: &mut [f64]) {
         }
     }
     k = 0;
-    for q in 0..n {
+    for (q, o) in out.iter_mut().enumerate().take(n) {
         while z[k + 1] < q as f64 {
             k += 1;
         }
         let d = q as f64 - v[k] as f64;
-        out[q] = d * d + f[v[k]];
+        *o = d * d + f[v[k]];
     }
     f.copy_from_slice(&out[..n]);
 }
@@ -129,7 +129,7 @@ mod tests {
         };
         let site: Vec<bool> = (0..grid.len()).map(|i| i % 17 == 3 || i == 100).collect();
         let d = squared_distance_to(&grid, &site);
-        for i in 0..grid.len() {
+        for (i, &di) in d.iter().enumerate() {
             let a = grid.coords(i);
             let brute = (0..grid.len())
                 .filter(|&j| site[j])
@@ -140,7 +140,7 @@ mod tests {
                         .sum::<f64>()
                 })
                 .fold(f64::INFINITY, f64::min);
-            assert_eq!(d[i], brute, "voxel {a:?}");
+            assert_eq!(di, brute, "voxel {a:?}");
         }
     }
 }

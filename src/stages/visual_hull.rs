@@ -340,6 +340,82 @@ fn refine(
     }
 }
 
+/// Fills empty voxels that the grid's outside cannot reach (6-connected): a visual hull has
+/// no inner cavities, these are discretization artefacts (voxels whose small footprint fell
+/// into a one-pixel gap of a silhouette).
+pub fn fill_cavities(grid: &GridSpec, occupied: &mut [bool]) {
+    let [nx, ny, nz] = grid.dims;
+    let mut outside = vec![false; grid.len()];
+    let mut stack: Vec<usize> = Vec::new();
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                let border =
+                    x == 0 || y == 0 || z == 0 || x == nx - 1 || y == ny - 1 || z == nz - 1;
+                let i = grid.index(x, y, z);
+                if border && !occupied[i] && !outside[i] {
+                    outside[i] = true;
+                    stack.push(i);
+                }
+            }
+        }
+    }
+    while let Some(i) = stack.pop() {
+        let [x, y, z] = grid.coords(i);
+        let mut visit = |j: usize| {
+            if !occupied[j] && !outside[j] {
+                outside[j] = true;
+                stack.push(j);
+            }
+        };
+        if x > 0 {
+            visit(i - 1);
+        }
+        if x + 1 < nx {
+            visit(i + 1);
+        }
+        if y > 0 {
+            visit(i - nx);
+        }
+        if y + 1 < ny {
+            visit(i + nx);
+        }
+        if z > 0 {
+            visit(i - nx * ny);
+        }
+        if z + 1 < nz {
+            visit(i + nx * ny);
+        }
+    }
+    for (o, out) in occupied.iter_mut().zip(&outside) {
+        *o = !*out;
+    }
+}
+
+/// A 3x3x3 box blur of per-voxel values (clamped at the border). On a signed distance it
+/// keeps the zero level in place on smooth surfaces and removes features one voxel thin:
+/// slits that single columns of pixels cut, lone voxels, and voxels joined only by an edge,
+/// which would otherwise give the mesh spurious handles.
+pub fn box_blur_3d(grid: &GridSpec, values: &[f32]) -> Vec<f32> {
+    let [nx, ny, nz] = grid.dims;
+    let mut cur = values.to_vec();
+    for axis in 0..3 {
+        let (n, stride) = match axis {
+            0 => (nx, 1),
+            1 => (ny, nx),
+            _ => (nz, nx * ny),
+        };
+        let src = cur.clone();
+        cur.par_iter_mut().enumerate().for_each(|(i, v)| {
+            let c = (i / stride) % n;
+            let lo = if c > 0 { i - stride } else { i };
+            let hi = if c + 1 < n { i + stride } else { i };
+            *v = (src[lo] + src[i] + src[hi]) / 3.0;
+        });
+    }
+    cur
+}
+
 /// Checks the memory a grid needs against the cap.
 pub fn check_memory(grid: &GridSpec, p: &VisualHullParams) -> std::result::Result<(), String> {
     let mb = grid.len() as f64 * BYTES_PER_VOXEL / 1e6;
@@ -362,7 +438,7 @@ pub fn validate(p: &VisualHullParams) -> std::result::Result<(), String> {
         ));
     }
     if let Some(b) = &p.bbox {
-        if (0..3).any(|a| !(b.min[a] < b.max[a])) {
+        if (0..3).any(|a| b.min[a] >= b.max[a] || !b.min[a].is_finite() || !b.max[a].is_finite()) {
             return Err(format!(
                 "visual_hull.bbox: min {:?} must be below max {:?} on every axis",
                 b.min, b.max
@@ -446,11 +522,12 @@ pub fn reconstruct(
     }
     let grid = GridSpec::covering(lo, hi, p.voxel_size);
     check_memory(&grid, p)?;
-    let occupied = carve(&grid, cams, &counts, p);
+    let mut occupied = carve(&grid, cams, &counts, p);
     if !occupied.iter().any(|&o| o) {
         return Ok(None);
     }
-    let sdf = signed_distance(&grid, &occupied);
+    fill_cavities(&grid, &mut occupied);
+    let sdf = box_blur_3d(&grid, &signed_distance(&grid, &occupied));
     let mut mesh = mesh_sdf(&grid, &sdf);
     taubin(&mut mesh, p.smoothing_iterations);
     Ok(Some(Hull {
