@@ -124,6 +124,39 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
     Ok(rows)
 }
 
+/// Silhouette coverage per camera: the share of each view's silhouette pixels that the
+/// reconstruction's mesh, projected through the camera, covers (1 when the mesh explains
+/// every silhouette pixel; a conservative hull scores about 1 with a correct calibration).
+pub fn reprojection_coverage(job: &Job, stage: &str, frame: u32) -> Result<Vec<(String, f64)>> {
+    let ctx = crate::stages::Context {
+        config: &job.config,
+        sequence: &job.sequence,
+        cache: &job.cache,
+    };
+    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
+    let (ply, _) = crate::stages::hull_files(frame);
+    let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;
+    Ok(job
+        .sequence
+        .cameras
+        .par_iter()
+        .zip(masks.par_iter())
+        .map(|(cam, mask)| {
+            let rays = crate::synth::raster::PixelRays::new(cam);
+            let frags =
+                crate::synth::raster::rasterize(cam, &rays, &mesh.vertices, &mesh.triangles);
+            let (mut sil, mut covered) = (0usize, 0usize);
+            for (m, f) in mask.as_raw().iter().zip(&frags) {
+                if *m >= 128 {
+                    sil += 1;
+                    covered += f.is_some() as usize;
+                }
+            }
+            (cam.name.clone(), covered as f64 / sil.max(1) as f64)
+        })
+        .collect())
+}
+
 /// The CSV text of reconstruction rows.
 pub fn reconstruction_csv(rows: &[ReconRow]) -> String {
     let mut s = String::from("frame,stage,vertices,accuracy90_m,completeness,voxel_m\n");

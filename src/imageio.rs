@@ -1,6 +1,6 @@
 //! PNG writing (atomic, fast compression).
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};
 use std::path::Path;
@@ -10,10 +10,6 @@ fn write_png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColorType)
         PngEncoder::new_with_quality(out, CompressionType::Default, FilterType::Adaptive)
             .write_image(data, w, h, color)
             .map_err(|e| std::io::Error::other(e.to_string()))
-    })
-    .map_err(|e| match e {
-        Error::Io { path, source } => Error::Io { path, source },
-        other => other,
     })
 }
 

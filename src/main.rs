@@ -88,6 +88,21 @@ enum Command {
         #[command(subcommand)]
         what: BenchWhat,
     },
+    /// Render a frame's cached reconstruction through one camera beside the input frame
+    /// (silhouette outline in green; silhouette the mesh misses in red).
+    Render {
+        /// The pipeline.yaml.
+        file: PathBuf,
+        /// The frame.
+        #[arg(long, default_value_t = 0)]
+        frame: u32,
+        /// The camera name (default: the first camera).
+        #[arg(long)]
+        camera: Option<String>,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Check a capture against its calibration and report what it holds.
     Check {
         /// The pipeline.yaml naming the calibration and the sequence.
@@ -166,6 +181,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Evaluate { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
+            if !job
+                .frames
+                .iter()
+                .any(|&f| job.sequence.ground_truth_mesh_path(f).exists())
+            {
+                // No ground truth (real captures): how well the hull explains the silhouettes.
+                let mut csv = String::from("frame,stage,camera,silhouette_coverage\n");
+                println!("no ground truth: silhouette coverage of the reprojected visual hull per camera");
+                for &f in &job.frames {
+                    for (cam, c) in hullpose::eval::reprojection_coverage(&job, "visual_hull", f)? {
+                        println!("frame {f:>4}  {cam:>14}  {:>7.2}%", c * 100.0);
+                        csv.push_str(&format!("{f},visual_hull,{cam},{c:.6}\n"));
+                    }
+                }
+                let path = job.config.output.join("evaluation").join("coverage.csv");
+                hullpose::fsutil::write_atomic(&path, csv.as_bytes())?;
+                println!("written to {}", path.display());
+                return Ok(());
+            }
             let rows = hullpose::eval::reconstruction(&job)?;
             print!("{}", hullpose::eval::reconstruction_table(&rows));
             let csv = job
@@ -198,6 +232,51 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 print!("{}", hullpose::bench::meshing(size, repeat))
             }
         },
+        Command::Render {
+            file,
+            frame,
+            camera,
+            out,
+        } => {
+            let job = Job::load(
+                Config::load(&file)?,
+                Some(FrameRange {
+                    first: frame,
+                    last: frame,
+                }),
+            )?;
+            let seq = &job.sequence;
+            let c = match &camera {
+                None => 0,
+                Some(name) => seq
+                    .cameras
+                    .iter()
+                    .position(|c| &c.name == name)
+                    .ok_or_else(|| {
+                        hullpose::Error::Usage(format!(
+                            "no camera named '{name}' in {}",
+                            job.config.calibration.display()
+                        ))
+                    })?,
+            };
+            let ctx = hullpose::stages::Context {
+                config: &job.config,
+                sequence: seq,
+                cache: &job.cache,
+            };
+            let masks = hullpose::stages::load_silhouettes(&ctx, frame)?;
+            let (ply, _) = hullpose::stages::hull_files(frame);
+            let mesh =
+                hullpose::geometry::ply::read_ply(&job.cache.stage_dir("visual_hull").join(ply))?;
+            let img = hullpose::overlay::mesh_beside_frame(
+                &seq.cameras[c],
+                &seq.load_frame(c, frame)?,
+                &masks[c],
+                &mesh,
+            );
+            hullpose::imageio::write_rgb(&out, &img)?;
+            println!("wrote {}", out.display());
+        }
         Command::Status { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
             println!(

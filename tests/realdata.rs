@@ -91,3 +91,95 @@ fn temple_ring_loads_and_projects_onto_the_object() {
         false,
     );
 }
+
+/// Runs an example pipeline (examples/middlebury-SET.yaml) on the real capture in a temporary
+/// cache and returns the per-camera silhouette coverage of the reprojected hull.
+fn example_coverage(set: &str) -> Option<Vec<(String, f64)>> {
+    let shared = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared");
+    if !shared.join("realdata").exists() {
+        eprintln!("skipped: {} is not present", shared.display());
+        return None;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let example = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("examples/middlebury-{set}.yaml")),
+    )
+    .unwrap();
+    let yaml = example
+        .replace("../../shared", &shared.display().to_string())
+        .replace("../cache", &dir.path().join("cache").display().to_string())
+        .replace(
+            "../output",
+            &dir.path().join("output").display().to_string(),
+        );
+    std::fs::write(dir.path().join("p.yaml"), yaml).unwrap();
+    let bin = env!("CARGO_BIN_EXE_pipeline");
+    let run = std::process::Command::new(bin)
+        .args(["run", "p.yaml"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let eval = std::process::Command::new(bin)
+        .args(["evaluate", "p.yaml"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let csv = std::fs::read_to_string(
+        dir.path()
+            .join(format!("output/middlebury-{set}/evaluation/coverage.csv")),
+    )
+    .unwrap();
+    Some(
+        csv.lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                (f[2].to_string(), f[3].parse().unwrap())
+            })
+            .collect(),
+    )
+}
+
+#[test]
+fn dino_hull_reprojects_onto_the_silhouettes_of_the_good_views() {
+    let Some(coverage) = example_coverage("dino") else {
+        return;
+    };
+    let good = std::fs::read_to_string(
+        realdata().join("dinoSparseRing/original/dinoSR_good_silhouette_images.txt"),
+    )
+    .unwrap();
+    let good: Vec<&str> = good
+        .split_whitespace()
+        .map(|n| n.trim_end_matches(".png"))
+        .collect();
+    assert_eq!(good.len(), 15);
+    for name in good {
+        let c = coverage.iter().find(|(n, _)| n == name).unwrap().1;
+        assert!(
+            c >= 0.90,
+            "{name}: the hull covers {:.1}% of the silhouette",
+            c * 100.0
+        );
+    }
+}
+
+#[test]
+fn temple_hull_runs_from_its_example() {
+    let Some(coverage) = example_coverage("temple") else {
+        return;
+    };
+    assert_eq!(coverage.len(), 16);
+    let mean = coverage.iter().map(|c| c.1).sum::<f64>() / 16.0;
+    assert!(mean >= 0.95, "mean coverage {mean:.3}");
+}

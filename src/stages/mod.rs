@@ -111,6 +111,7 @@ fn silhouette_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result
         key.add("camera", &seq.cameras[c].name);
         match method {
             SilhouetteMethod::Masks => key.add_file(&seq.mask_path(c, frame))?,
+            SilhouetteMethod::Constant => key.add_file(&seq.frame_path(c, frame))?,
             _ => key
                 .add_file(&seq.frame_path(c, frame))?
                 .add_file(&seq.background_path(c))?,

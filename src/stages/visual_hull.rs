@@ -451,8 +451,11 @@ pub fn validate(p: &VisualHullParams) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// The box to carve: pipeline.yaml's, or derived from a coarse carving of the cube spanned
-/// by the camera centres (cameras surround the subject).
+/// The box to carve: pipeline.yaml's, or derived from the silhouettes: the cube spanned by
+/// the camera centres (cameras surround the subject) is carved coarsely (64^3), then the box
+/// of what remains is carved again at 64^3 to tighten it. These passes keep only voxels seen
+/// by at least half of the cameras, so that space that few narrow views see (and cannot
+/// carve) does not inflate the box.
 pub fn carving_box(
     cams: &[Camera],
     counts: &[MaskCounts],
@@ -471,28 +474,38 @@ pub fn carving_box(
     }
     let centre = (lo + hi) / 2.0;
     let half = (hi - lo).max() / 2.0;
-    let coarse = GridSpec::covering(
+    let mut bounds = (
         centre - Vector3::repeat(half),
         centre + Vector3::repeat(half),
-        2.0 * half / 64.0,
     );
-    let occupied = carve(&coarse, cams, counts, p);
-    let (mut a, mut b) = (
-        Vector3::repeat(f64::INFINITY),
-        Vector3::repeat(f64::NEG_INFINITY),
-    );
-    for (i, _) in occupied.iter().enumerate().filter(|(_, &o)| o) {
-        let [x, y, z] = coarse.coords(i);
-        let v = coarse.origin + coarse.voxel * Vector3::new(x as f64, y as f64, z as f64);
-        a = a.inf(&v);
-        b = b.sup(&(v + Vector3::repeat(coarse.voxel)));
+    let coarse = VisualHullParams {
+        min_views: p.min_views.max(cams.len().div_ceil(2)),
+        ..p.clone()
+    };
+    for _ in 0..2 {
+        let size = (bounds.1 - bounds.0).max() / 64.0;
+        let grid = GridSpec::covering(bounds.0, bounds.1, size);
+        let occupied = carve(&grid, cams, counts, &coarse);
+        let (mut a, mut b) = (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        );
+        for (i, _) in occupied.iter().enumerate().filter(|(_, &o)| o) {
+            let [x, y, z] = grid.coords(i);
+            let v = grid.origin + size * Vector3::new(x as f64, y as f64, z as f64);
+            a = a.inf(&v);
+            b = b.sup(&(v + Vector3::repeat(size)));
+        }
+        if a.x > b.x {
+            return None;
+        }
+        // The coarse voxels are conservative already; one more coarse voxel of slack.
+        bounds = (a - Vector3::repeat(size), b + Vector3::repeat(size));
     }
-    if a.x > b.x {
-        return None;
-    }
-    // The coarse voxels are conservative already; one more coarse voxel and the margin.
-    let pad = Vector3::repeat(coarse.voxel + p.margin);
-    Some((a - pad, b + pad))
+    Some((
+        bounds.0 - Vector3::repeat(p.margin),
+        bounds.1 + Vector3::repeat(p.margin),
+    ))
 }
 
 /// Carves one frame and meshes it. `None` when the silhouettes leave nothing (an empty

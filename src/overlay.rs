@@ -1,0 +1,65 @@
+//! Pictures of results for people: a reconstruction rendered through a capture camera
+//! beside the frame it explains.
+
+use crate::camera::Camera;
+use crate::geometry::TriMesh;
+use image::{GrayImage, Rgb, RgbImage};
+
+/// The frame with the silhouette's outline in green (left) beside `mesh` rendered through
+/// `cam` with grey Lambert shading lit from the camera, silhouette pixels the mesh misses
+/// in red (right).
+pub fn mesh_beside_frame(
+    cam: &Camera,
+    frame: &RgbImage,
+    mask: &GrayImage,
+    mesh: &TriMesh,
+) -> RgbImage {
+    let (w, h) = (cam.width, cam.height);
+    let rays = crate::synth::raster::PixelRays::new(cam);
+    let frags = crate::synth::raster::rasterize(cam, &rays, &mesh.vertices, &mesh.triangles);
+    let normals = mesh.vertex_normals();
+    let centre = cam.centre();
+    let mut out = RgbImage::new(2 * w, h);
+    let fg = |x: i64, y: i64| {
+        x >= 0
+            && y >= 0
+            && x < w as i64
+            && y < h as i64
+            && mask.get_pixel(x as u32, y as u32).0[0] >= 128
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let (xi, yi) = (x as i64, y as i64);
+            let edge = fg(xi, yi)
+                && !(fg(xi - 1, yi) && fg(xi + 1, yi) && fg(xi, yi - 1) && fg(xi, yi + 1));
+            out.put_pixel(
+                x,
+                y,
+                if edge {
+                    Rgb([0, 255, 0])
+                } else {
+                    *frame.get_pixel(x, y)
+                },
+            );
+            let right = match &frags[i] {
+                Some(f) => {
+                    let t = mesh.triangles[f.triangle as usize].map(|k| k as usize);
+                    let n = (normals[t[0]] * f.bary[0]
+                        + normals[t[1]] * f.bary[1]
+                        + normals[t[2]] * f.bary[2])
+                        .normalize();
+                    let p = mesh.vertices[t[0]] * f.bary[0]
+                        + mesh.vertices[t[1]] * f.bary[1]
+                        + mesh.vertices[t[2]] * f.bary[2];
+                    let shade = 40.0 + 200.0 * n.dot(&(centre - p).normalize()).abs();
+                    Rgb([shade as u8; 3])
+                }
+                None if fg(xi, yi) => Rgb([220, 40, 40]),
+                None => Rgb([0, 0, 0]),
+            };
+            out.put_pixel(w + x, y, right);
+        }
+    }
+    out
+}
