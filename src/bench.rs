@@ -20,8 +20,10 @@ fn best_of<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     (best, out.expect("ran once"))
 }
 
-/// Times the visual hull's steps on one frame's cached silhouettes (best of `repeat`).
-pub fn visual_hull(job: &Job, frame: u32, repeat: usize) -> Result<String> {
+/// Times the visual hull's steps on one frame's cached silhouettes (best of `repeat`). With
+/// `cube = Some(n)` the grid is n^3 voxels centred on the derived box (for comparisons on a
+/// fixed grid size).
+pub fn visual_hull(job: &Job, frame: u32, repeat: usize, cube: Option<usize>) -> Result<String> {
     let ctx = crate::stages::Context {
         config: &job.config,
         sequence: &job.sequence,
@@ -31,12 +33,23 @@ pub fn visual_hull(job: &Job, frame: u32, repeat: usize) -> Result<String> {
     let cams = &job.sequence.cameras;
     let p = &job.config.visual_hull;
     let (t_counts, counts) = best_of(repeat, || {
-        masks.iter().map(MaskCounts::new).collect::<Vec<_>>()
+        masks
+            .iter()
+            .zip(cams)
+            .map(|(m, c)| MaskCounts::new(m, c))
+            .collect::<Vec<_>>()
     });
     let (t_box, bbox) = best_of(repeat, || visual_hull::carving_box(cams, &counts, p));
     let (lo, hi) =
         bbox.ok_or_else(|| crate::Error::Usage(format!("frame {frame} has empty silhouettes")))?;
-    let grid = crate::geometry::grid::GridSpec::covering(lo, hi, p.voxel_size);
+    let grid = match cube {
+        None => crate::geometry::grid::GridSpec::covering(lo, hi, p.voxel_size),
+        Some(n) => crate::geometry::grid::GridSpec {
+            origin: (lo + hi) / 2.0 - Vector3::repeat(n as f64 * p.voxel_size / 2.0),
+            voxel: p.voxel_size,
+            dims: [n, n, n],
+        },
+    };
     let (t_carve, occupied) = best_of(repeat, || visual_hull::carve(&grid, cams, &counts, p));
     let (t_sdf, sdf) = best_of(repeat, || {
         crate::geometry::distance::signed_distance(&grid, &occupied)
@@ -49,8 +62,16 @@ pub fn visual_hull(job: &Job, frame: u32, repeat: usize) -> Result<String> {
     });
     let kept = occupied.iter().filter(|&&o| o).count();
     Ok(format!(
-        "visual hull, frame {frame}: {} cameras, grid {}x{}x{} ({:.1} M voxels of {} m, {} kept), mesh {} vertices\n\
+        "grid origin {} {} {} voxel {} dims {} {} {}\n\
+         visual hull, frame {frame}: {} cameras, grid {}x{}x{} ({:.1} M voxels of {} m, {} kept), mesh {} vertices\n\
          {:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n",
+        grid.origin.x,
+        grid.origin.y,
+        grid.origin.z,
+        grid.voxel,
+        grid.dims[0],
+        grid.dims[1],
+        grid.dims[2],
         cams.len(),
         grid.dims[0],
         grid.dims[1],

@@ -130,6 +130,27 @@ impl Camera {
         Matrix2::new(dxdx, dxdy, dydx, dydy)
     }
 
+    /// An upper bound (with 1% slack) of how much the lens distortion magnifies small
+    /// lengths anywhere in the image: the largest singular value of the distortion's Jacobian
+    /// over a grid of image points; 1 without distortion.
+    pub fn distortion_gain(&self) -> f64 {
+        if !self.has_distortion() {
+            return 1.0;
+        }
+        let mut gain: f64 = 1.0;
+        for j in 0..=12 {
+            for i in 0..=16 {
+                let px = Vector2::new(
+                    i as f64 / 16.0 * (self.width as f64 - 1.0),
+                    j as f64 / 12.0 * (self.height as f64 - 1.0),
+                );
+                let jac = self.distort_jacobian(self.pixel_to_normalized(px));
+                gain = gain.max(jac.singular_values().max());
+            }
+        }
+        gain * 1.01
+    }
+
     /// Removes the distortion from distorted normalized coordinates (inverse of
     /// [`Camera::distort`]) by Newton's method; exact to ~1e-15 for realistic lenses.
     pub fn undistort(&self, d: Vector2<f64>) -> Vector2<f64> {

@@ -120,6 +120,9 @@ enum BenchWhat {
         /// Repetitions; the best time is reported.
         #[arg(long, default_value_t = 3)]
         repeat: usize,
+        /// Carve a fixed N^3 grid (voxel_size from pipeline.yaml) centred on the derived box.
+        #[arg(long)]
+        cube: Option<usize>,
     },
     /// Iso-surface extraction of a sphere on an N^3 grid.
     Meshing {
@@ -218,6 +221,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 file,
                 frame,
                 repeat,
+                cube,
             } => {
                 let job = Job::load(
                     Config::load(&file)?,
@@ -226,7 +230,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         last: frame,
                     }),
                 )?;
-                print!("{}", hullpose::bench::visual_hull(&job, frame, repeat)?);
+                print!(
+                    "{}",
+                    hullpose::bench::visual_hull(&job, frame, repeat, cube)?
+                );
             }
             BenchWhat::Meshing { size, repeat } => {
                 print!("{}", hullpose::bench::meshing(size, repeat))

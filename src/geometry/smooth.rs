@@ -3,6 +3,7 @@
 
 use super::mesh::TriMesh;
 use nalgebra::Vector3;
+use rayon::prelude::*;
 
 /// Smooths `mesh` in place with `iterations` lambda/mu pairs (lambda = 0.5, mu = -0.53,
 /// uniform weights over each vertex's edge neighbours).
@@ -25,6 +26,7 @@ pub fn taubin(mesh: &mut TriMesh, iterations: usize) {
     }
     let step = |factor: f64, v: &mut Vec<Vector3<f64>>| {
         let moved: Vec<Vector3<f64>> = (0..n)
+            .into_par_iter()
             .map(|i| {
                 let nb = &neighbours[i];
                 if nb.is_empty() {

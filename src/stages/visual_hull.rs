@@ -1,9 +1,9 @@
 //! Stage 2, the visual hull (method.md "Stage 2"): conservative voxel carving, coarse to
 //! fine, then a watertight mesh of the occupancy.
 //!
-//! A voxel stays when its projected footprint (the pixel rectangle bounding the projections
-//! of its eight corners) holds at least one silhouette pixel in every camera whose image its
-//! centre falls in; with `all_but = k`, up to k cameras may disagree. Voxels seen by fewer than
+//! A voxel stays when its projected footprint (a pixel rectangle surely holding the image of
+//! the voxel's bounding ball) holds at least one silhouette pixel in every camera whose image
+//! its centre falls in; with `all_but = k`, up to k cameras may disagree. Voxels seen by fewer than
 //! `min_views` cameras are carved. Carving works on blocks of 16^3 voxels first: a block whose
 //! footprint lies inside a camera's image and holds no silhouette pixel is carved whole, a
 //! block whose footprint is all silhouette in every camera that sees it stays whole, and only
@@ -85,10 +85,13 @@ pub struct MaskCounts {
     w: usize,
     h: usize,
     sums: Vec<u32>,
+    /// Bound on the magnification of the camera's lens distortion ([`Camera::distortion_gain`]).
+    gain: f64,
 }
 
 impl MaskCounts {
-    pub fn new(mask: &GrayImage) -> MaskCounts {
+    /// The table of `mask`, seen by `cam`.
+    pub fn new(mask: &GrayImage, cam: &Camera) -> MaskCounts {
         let (w, h) = (mask.width() as usize, mask.height() as usize);
         let mut sums = vec![0u32; (w + 1) * (h + 1)];
         for y in 0..h {
@@ -98,7 +101,12 @@ impl MaskCounts {
                 sums[(y + 1) * (w + 1) + x + 1] = sums[y * (w + 1) + x + 1] + row;
             }
         }
-        MaskCounts { w, h, sums }
+        MaskCounts {
+            w,
+            h,
+            sums,
+            gain: cam.distortion_gain(),
+        }
     }
 
     /// Silhouette pixels in the inclusive rectangle [x0, x1] x [y0, y1] (already clipped).
@@ -128,32 +136,30 @@ enum View {
     Unknown,
 }
 
-/// Classifies the box [lo, hi] in one camera.
-fn view_box(cam: &Camera, counts: &MaskCounts, lo: &Vector3<f64>, hi: &Vector3<f64>) -> View {
-    let (mut u0, mut v0, mut u1, mut v1) = (
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for k in 0..8 {
-        let p = Vector3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
-        let (px, depth) = cam.project_with_depth(&p);
-        if depth <= 1e-6 {
-            return View::Unknown;
-        }
-        u0 = u0.min(px.x);
-        v0 = v0.min(px.y);
-        u1 = u1.max(px.x);
-        v1 = v1.max(px.y);
+/// The pixel rectangle (inclusive, unclipped) that surely holds the projection of the ball
+/// of `radius` metres around `centre`; `None` when the ball reaches behind the camera. One
+/// projection instead of eight corners: the ball's image lies within f * R / (z - R) pixels of
+/// the centre's image (pinhole bound), times the lens distortion's magnification bound
+/// `gain` (plus a quarter pixel against rounding).
+fn footprint(cam: &Camera, gain: f64, centre: &Vector3<f64>, radius: f64) -> Option<[f64; 4]> {
+    let (px, z) = cam.project_with_depth(centre);
+    if z - radius <= 1e-6 {
+        return None;
     }
-    // Pixels whose unit squares meet the footprint, half a pixel wider for safety.
-    let (x0, y0) = ((u0 - 0.5).round(), (v0 - 0.5).round());
-    let (x1, y1) = ((u1 + 0.5).round(), (v1 + 0.5).round());
+    let r = gain * (cam.fx.max(cam.fy) + cam.skew.abs()) * radius / (z - radius) + 0.25;
+    Some([
+        (px.x - r).round(),
+        (px.y - r).round(),
+        (px.x + r).round(),
+        (px.y + r).round(),
+    ])
+}
+
+/// Classifies a ball (the bounding ball of a box) in one camera.
+fn view_ball(cam: &Camera, counts: &MaskCounts, centre: &Vector3<f64>, radius: f64) -> View {
+    let Some([x0, y0, x1, y1]) = footprint(cam, counts.gain, centre, radius) else {
+        return View::Unknown;
+    };
     let (w, h) = (counts.w as f64, counts.h as f64);
     if x1 < 0.0 || y1 < 0.0 || x0 > w - 1.0 || y0 > h - 1.0 {
         return View::Unseen;
@@ -173,68 +179,9 @@ fn view_box(cam: &Camera, counts: &MaskCounts, lo: &Vector3<f64>, hi: &Vector3<f
     }
 }
 
-/// Whether a single voxel stays: the rule of the module doc.
-fn keep_voxel(
-    cams: &[Camera],
-    counts: &[MaskCounts],
-    lo: &Vector3<f64>,
-    hi: &Vector3<f64>,
-    p: &VisualHullParams,
-) -> bool {
-    let centre = (lo + hi) / 2.0;
-    let (mut seen, mut against) = (0usize, 0usize);
-    for (cam, cnt) in cams.iter().zip(counts) {
-        let Some(px) = cam.project(&centre) else {
-            continue;
-        };
-        if !cam.in_image(&px) {
-            continue;
-        }
-        seen += 1;
-        let empty = match view_box(cam, cnt, lo, hi) {
-            View::Empty => true,
-            View::Full | View::Partial | View::Unseen => false,
-            View::Unknown => {
-                // The footprint straddles the border: count within its clipped part.
-                clipped_empty(cam, cnt, lo, hi)
-            }
-        };
-        against += empty as usize;
-        if against > p.all_but {
-            return false;
-        }
-    }
-    seen >= p.min_views
-}
-
-/// For a voxel whose footprint crosses the image border: no silhouette pixel in the part
-/// inside the image.
-fn clipped_empty(cam: &Camera, counts: &MaskCounts, lo: &Vector3<f64>, hi: &Vector3<f64>) -> bool {
-    let (mut u0, mut v0, mut u1, mut v1) = (
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for k in 0..8 {
-        let q = Vector3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
-        let (px, depth) = cam.project_with_depth(&q);
-        if depth <= 1e-6 {
-            return false;
-        }
-        u0 = u0.min(px.x);
-        v0 = v0.min(px.y);
-        u1 = u1.max(px.x);
-        v1 = v1.max(px.y);
-    }
-    let clamp = |v: f64, n: usize| v.round().clamp(0.0, n as f64 - 1.0) as usize;
-    let (x0, y0) = (clamp(u0 - 0.5, counts.w), clamp(v0 - 0.5, counts.h));
-    let (x1, y1) = (clamp(u1 + 0.5, counts.w), clamp(v1 + 0.5, counts.h));
-    counts.count(x0, y0, x1, y1) == 0
+/// Classifies the box [lo, hi] in one camera (through its bounding ball).
+fn view_box(cam: &Camera, counts: &MaskCounts, lo: &Vector3<f64>, hi: &Vector3<f64>) -> View {
+    view_ball(cam, counts, &((lo + hi) / 2.0), (hi - lo).norm() / 2.0)
 }
 
 /// Block edge of the coarse level, voxels.
@@ -254,10 +201,16 @@ pub fn carve(
                 .flat_map(move |by| (0..nx.div_ceil(BLOCK)).map(move |bx| [bx, by, bz]))
         })
         .collect();
+    let all: Vec<u16> = (0..cams.len() as u16).collect();
     let kept: Vec<Vec<usize>> = blocks
         .par_iter()
         .map(|b| {
             let mut out = Vec::new();
+            let start = Votes {
+                open: all.clone(),
+                keep: 0,
+                against: 0,
+            };
             refine(
                 grid,
                 cams,
@@ -265,6 +218,7 @@ pub fn carve(
                 p,
                 [b[0] * BLOCK, b[1] * BLOCK, b[2] * BLOCK],
                 BLOCK,
+                start,
                 &mut out,
             );
             out
@@ -279,8 +233,22 @@ pub fn carve(
     occupied
 }
 
-/// Decides the cube of `size` voxels at voxel `at`, splitting it when undecided; pushes the
-/// indices of kept voxels.
+/// What the cameras have settled for every voxel of a block so far.
+#[derive(Clone)]
+struct Votes {
+    /// Cameras that still have to be asked.
+    open: Vec<u16>,
+    /// Cameras that see every voxel of the block and keep it.
+    keep: usize,
+    /// Cameras that carve every voxel of the block.
+    against: usize,
+}
+
+/// Decides the cube of `size` voxels at voxel `at`, splitting it while cameras disagree;
+/// pushes the indices of kept voxels. A camera that keeps (footprint all silhouette) or does
+/// not see (footprint outside its image) a block says the same of every voxel inside, so it
+/// is not asked again below.
+#[allow(clippy::too_many_arguments)]
 fn refine(
     grid: &GridSpec,
     cams: &[Camera],
@@ -288,35 +256,72 @@ fn refine(
     p: &VisualHullParams,
     at: [usize; 3],
     size: usize,
+    mut votes: Votes,
     out: &mut Vec<usize>,
 ) {
-    let end = [0, 1, 2].map(|a| (at[a] + size).min(grid.dims[a]));
     if (0..3).any(|a| at[a] >= grid.dims[a]) {
         return;
     }
+    let end = [0, 1, 2].map(|a| (at[a] + size).min(grid.dims[a]));
     let lo = grid.origin + grid.voxel * Vector3::new(at[0] as f64, at[1] as f64, at[2] as f64);
     let hi = grid.origin + grid.voxel * Vector3::new(end[0] as f64, end[1] as f64, end[2] as f64);
+    let centre = (lo + hi) / 2.0;
+    let radius = (hi - lo).norm() / 2.0;
     if size == 1 {
-        if keep_voxel(cams, counts, &lo, &hi, p) {
+        // The voxel rule: every open camera whose image holds the centre votes.
+        let mut seen = votes.keep;
+        for &c in &votes.open {
+            let (cam, cnt) = (&cams[c as usize], &counts[c as usize]);
+            let (px, z) = cam.project_with_depth(&centre);
+            if z <= 0.0 || !cam.in_image(&px) {
+                continue;
+            }
+            seen += 1;
+            let empty = match footprint(cam, cnt.gain, &centre, radius) {
+                None => false,
+                Some([x0, y0, x1, y1]) => {
+                    // Count within the part of the footprint inside the image.
+                    let clamp = |v: f64, n: usize| v.clamp(0.0, n as f64 - 1.0) as usize;
+                    cnt.count(
+                        clamp(x0, cnt.w),
+                        clamp(y0, cnt.h),
+                        clamp(x1, cnt.w),
+                        clamp(y1, cnt.h),
+                    ) == 0
+                }
+            };
+            votes.against += empty as usize;
+            if votes.against > p.all_but {
+                return;
+            }
+        }
+        if seen >= p.min_views {
             out.push(grid.index(at[0], at[1], at[2]));
         }
         return;
     }
-    let views: Vec<View> = cams
-        .iter()
-        .zip(counts)
-        .map(|(c, n)| view_box(c, n, &lo, &hi))
-        .collect();
-    let empty = views.iter().filter(|&&v| v == View::Empty).count();
-    if empty > p.all_but {
-        return; // every voxel inside is carved by these cameras
+    let mut still_open = Vec::with_capacity(votes.open.len());
+    for &c in &votes.open {
+        match view_ball(&cams[c as usize], &counts[c as usize], &centre, radius) {
+            View::Full => votes.keep += 1,
+            View::Unseen => {}
+            View::Empty => {
+                votes.against += 1;
+                if votes.against > p.all_but {
+                    return; // every voxel inside is carved
+                }
+            }
+            View::Partial | View::Unknown => still_open.push(c),
+        }
     }
-    let full = views.iter().filter(|&&v| v == View::Full).count();
-    if views.iter().all(|&v| v == View::Full || v == View::Unseen) && full >= p.min_views {
-        for z in at[2]..end[2] {
-            for y in at[1]..end[1] {
-                for x in at[0]..end[0] {
-                    out.push(grid.index(x, y, z));
+    votes.open = still_open;
+    if votes.open.is_empty() {
+        if votes.keep >= p.min_views {
+            for z in at[2]..end[2] {
+                for y in at[1]..end[1] {
+                    for x in at[0]..end[0] {
+                        out.push(grid.index(x, y, z));
+                    }
                 }
             }
         }
@@ -333,6 +338,7 @@ fn refine(
                     p,
                     [at[0] + dx, at[1] + dy, at[2] + dz],
                     half,
+                    votes.clone(),
                     out,
                 );
             }
@@ -516,7 +522,11 @@ pub fn reconstruct(
     p: &VisualHullParams,
 ) -> std::result::Result<Option<Hull>, String> {
     validate(p)?;
-    let counts: Vec<MaskCounts> = masks.iter().map(MaskCounts::new).collect();
+    let counts: Vec<MaskCounts> = masks
+        .iter()
+        .zip(cams)
+        .map(|(m, c)| MaskCounts::new(m, c))
+        .collect();
     if counts.iter().all(|c| !c.any()) {
         return Ok(None);
     }
