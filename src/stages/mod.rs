@@ -63,7 +63,7 @@ pub const STAGES: &[StageDef] = &[
         name: "visual_hull",
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
-        format_version: 1,
+        format_version: 2,
         params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
         sources: visual_hull_sources,
         compute: visual_hull_compute,
