@@ -31,6 +31,11 @@ impl FrameRange {
         Ok(FrameRange { first, last })
     }
 
+    /// The range of one frame.
+    pub fn single(f: u32) -> FrameRange {
+        FrameRange { first: f, last: f }
+    }
+
     pub fn contains(&self, f: u32) -> bool {
         (self.first..=self.last).contains(&f)
     }

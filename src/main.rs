@@ -223,13 +223,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 repeat,
                 cube,
             } => {
-                let job = Job::load(
-                    Config::load(&file)?,
-                    Some(FrameRange {
-                        first: frame,
-                        last: frame,
-                    }),
-                )?;
+                let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
                 print!(
                     "{}",
                     hullpose::bench::visual_hull(&job, frame, repeat, cube)?
@@ -245,42 +239,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             camera,
             out,
         } => {
-            let job = Job::load(
-                Config::load(&file)?,
-                Some(FrameRange {
-                    first: frame,
-                    last: frame,
-                }),
-            )?;
-            let seq = &job.sequence;
-            let c = match &camera {
-                None => 0,
-                Some(name) => seq
-                    .cameras
-                    .iter()
-                    .position(|c| &c.name == name)
-                    .ok_or_else(|| {
-                        hullpose::Error::Usage(format!(
-                            "no camera named '{name}' in {}",
-                            job.config.calibration.display()
-                        ))
-                    })?,
-            };
-            let ctx = hullpose::stages::Context {
-                config: &job.config,
-                sequence: seq,
-                cache: &job.cache,
-            };
-            let masks = hullpose::stages::load_silhouettes(&ctx, frame)?;
-            let (ply, _) = hullpose::stages::hull_files(frame);
-            let mesh =
-                hullpose::geometry::ply::read_ply(&job.cache.stage_dir("visual_hull").join(ply))?;
-            let img = hullpose::overlay::mesh_beside_frame(
-                &seq.cameras[c],
-                &seq.load_frame(c, frame)?,
-                &masks[c],
-                &mesh,
-            );
+            let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
+            let img = hullpose::overlay::hull_beside_frame(&job, frame, camera.as_deref())?;
             hullpose::imageio::write_rgb(&out, &img)?;
             println!("wrote {}", out.display());
         }

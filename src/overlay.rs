@@ -2,7 +2,9 @@
 //! beside the frame it explains.
 
 use crate::camera::Camera;
+use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
+use crate::runner::Job;
 use image::{GrayImage, Rgb, RgbImage};
 
 /// The frame with the silhouette's outline in green (left) beside `mesh` rendered through
@@ -62,4 +64,37 @@ pub fn mesh_beside_frame(
         }
     }
     out
+}
+
+/// [`mesh_beside_frame`] for a job's cached visual hull of `frame`, through the camera
+/// named `camera` (the first camera when `None`).
+pub fn hull_beside_frame(job: &Job, frame: u32, camera: Option<&str>) -> Result<RgbImage> {
+    let seq = &job.sequence;
+    let c = match camera {
+        None => 0,
+        Some(name) => seq
+            .cameras
+            .iter()
+            .position(|c| c.name == name)
+            .ok_or_else(|| {
+                Error::Usage(format!(
+                    "no camera named '{name}' in {}",
+                    job.config.calibration.display()
+                ))
+            })?,
+    };
+    let ctx = crate::stages::Context {
+        config: &job.config,
+        sequence: seq,
+        cache: &job.cache,
+    };
+    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
+    let (ply, _) = crate::stages::hull_files(frame);
+    let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir("visual_hull").join(ply))?;
+    Ok(mesh_beside_frame(
+        &seq.cameras[c],
+        &seq.load_frame(c, frame)?,
+        &masks[c],
+        &mesh,
+    ))
 }

@@ -41,3 +41,23 @@ pub fn write_obj_to(
 pub fn write_obj(path: &Path, mesh: &TriMesh, normals: Option<&[Vector3<f64>]>) -> Result<()> {
     crate::fsutil::write_atomic_with(path, |w| write_obj_to(w, mesh, normals))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_vertices_normals_and_one_based_faces() {
+        let mesh = TriMesh {
+            vertices: vec![Vector3::zeros(), Vector3::x(), Vector3::y()],
+            triangles: vec![[0, 1, 2]],
+        };
+        let normals = mesh.vertex_normals();
+        let mut buf = Vec::new();
+        write_obj_to(&mut buf, &mesh, Some(&normals)).unwrap();
+        let text = String::from_utf8(buf).unwrap();
+        assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 3);
+        assert_eq!(text.lines().filter(|l| l.starts_with("vn ")).count(), 3);
+        assert!(text.contains("f 1//1 2//2 3//3"));
+    }
+}
