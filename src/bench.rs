@@ -109,3 +109,15 @@ pub fn meshing(n: usize, repeat: usize) -> String {
         mesh.triangles.len()
     )
 }
+
+/// Times building and solving the max-flow fixture graph of size n^3.
+pub fn maxflow_fixture(n: usize) -> String {
+    let t = Instant::now();
+    let mut g = crate::maxflow::fixture::fixture_graph(n);
+    let build = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let flow = g.maxflow();
+    let solve = t.elapsed().as_secs_f64();
+    let sink_side = (0..g.node_count()).filter(|&i| !g.is_source_side(i)).count();
+    format!("maxflow fixture n={n}: flow {flow}, build {build:.3} s, solve {solve:.3} s, sink side {sink_side} nodes\n")
+}

@@ -15,6 +15,7 @@ pub mod fsutil;
 pub mod geometry;
 pub mod imageio;
 pub mod joints;
+pub mod maxflow;
 pub mod overlay;
 pub mod runner;
 pub mod skeleton;

@@ -124,6 +124,11 @@ enum BenchWhat {
         #[arg(long)]
         cube: Option<usize>,
     },
+    /// The max-flow solver on the reference fixture graph of size N^3.
+    Maxflow {
+        #[arg(long, default_value_t = 64)]
+        size: usize,
+    },
     /// Iso-surface extraction of a sphere on an N^3 grid.
     Meshing {
         #[arg(long, default_value_t = 256)]
@@ -229,6 +234,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     hullpose::bench::visual_hull(&job, frame, repeat, cube)?
                 );
             }
+            BenchWhat::Maxflow { size } => print!("{}", hullpose::bench::maxflow_fixture(size)),
             BenchWhat::Meshing { size, repeat } => {
                 print!("{}", hullpose::bench::meshing(size, repeat))
             }

@@ -1,0 +1,96 @@
+use super::*;
+use crate::maxflow::fixture::fixture_graph;
+
+#[test]
+fn splitmix_matches_the_fixture_definition() {
+    // splitmix64(0) from the reference definition.
+    assert_eq!(crate::synth::rng::mix64(0), 0xE220A8397B1DCDAF);
+}
+
+#[test]
+fn reproduces_pymaxflow_on_the_small_fixtures() {
+    for (n, flow) in [(16, 4655.0), (32, 36184.0)] {
+        let mut g = fixture_graph(n);
+        let f = g.maxflow();
+        assert!((f - flow).abs() <= 1e-6 * flow, "n = {n}: {f} vs {flow}");
+    }
+}
+
+/// Edmonds-Karp on a dense capacity matrix: the reference.
+fn edmonds_karp(cap: &[Vec<f64>], s: usize, t: usize) -> f64 {
+    let n = cap.len();
+    let mut r = cap.to_vec();
+    let mut flow = 0.0;
+    loop {
+        let mut prev = vec![usize::MAX; n];
+        prev[s] = s;
+        let mut q = std::collections::VecDeque::from([s]);
+        while let Some(u) = q.pop_front() {
+            for v in 0..n {
+                if prev[v] == usize::MAX && r[u][v] > 1e-12 {
+                    prev[v] = u;
+                    q.push_back(v);
+                }
+            }
+        }
+        if prev[t] == usize::MAX {
+            return flow;
+        }
+        let mut b = f64::INFINITY;
+        let mut v = t;
+        while v != s {
+            b = b.min(r[prev[v]][v]);
+            v = prev[v];
+        }
+        let mut v = t;
+        while v != s {
+            r[prev[v]][v] -= b;
+            r[v][prev[v]] += b;
+            v = prev[v];
+        }
+        flow += b;
+    }
+}
+
+#[test]
+fn random_graphs_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
+    let mut rng = crate::synth::rng::Rng::new(42, 0);
+    for trial in 0..300 {
+        let n = 2 + (rng.next_u64() % 12) as usize;
+        // Dense reference: nodes 0..n, source n, sink n + 1. Integer capacities.
+        let mut cap = vec![vec![0.0; n + 2]; n + 2];
+        let mut g = Graph::new(n);
+        let edges = rng.next_u64() % (3 * n as u64 + 1);
+        for _ in 0..edges {
+            let (i, j) = ((rng.next_u64() % n as u64) as usize, (rng.next_u64() % n as u64) as usize);
+            if i == j {
+                continue;
+            }
+            let (c, rc) = ((rng.next_u64() % 10) as f64, (rng.next_u64() % 10) as f64);
+            g.add_edge(i, j, c as f32, rc as f32);
+            cap[i][j] += c;
+            cap[j][i] += rc;
+        }
+        for i in 0..n {
+            let (cs, ct) = ((rng.next_u64() % 12) as f64, (rng.next_u64() % 12) as f64);
+            let (cs, ct) = (if rng.uniform() < 0.5 { 0.0 } else { cs }, if rng.uniform() < 0.5 { 0.0 } else { ct });
+            g.add_terminal_weights(i, cs, ct);
+            cap[n][i] += cs;
+            cap[i][n + 1] += ct;
+        }
+        let reference = edmonds_karp(&cap, n, n + 1);
+        let flow = g.maxflow();
+        assert_eq!(flow, reference, "trial {trial}");
+        // The cut between the source side and the rest carries exactly the flow.
+        let side: Vec<bool> = (0..n).map(|i| g.is_source_side(i)).chain([true, false]).collect();
+        let mut cut = 0.0;
+        for u in 0..n + 2 {
+            for v in 0..n + 2 {
+                if side[u] && !side[v] {
+                    cut += cap[u][v];
+                }
+            }
+        }
+        assert_eq!(cut, flow, "trial {trial}: cut capacity");
+    }
+}
