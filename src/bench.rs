@@ -118,6 +118,8 @@ pub fn maxflow_fixture(n: usize) -> String {
     let t = Instant::now();
     let flow = g.maxflow();
     let solve = t.elapsed().as_secs_f64();
-    let sink_side = (0..g.node_count()).filter(|&i| !g.is_source_side(i)).count();
+    let sink_side = (0..g.node_count())
+        .filter(|&i| !g.is_source_side(i))
+        .count();
     format!("maxflow fixture n={n}: flow {flow}, build {build:.3} s, solve {solve:.3} s, sink side {sink_side} nodes\n")
 }

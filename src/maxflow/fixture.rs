@@ -15,10 +15,17 @@ pub fn fixture_graph(n: usize) -> Graph {
         for y in 0..n {
             for x in 0..n {
                 let i = idx(x, y, z);
-                let (dx, dy, dz) = (2 * x as i64 + 1 - n as i64, 2 * y as i64 + 1 - n as i64, 2 * z as i64 + 1 - n as i64);
+                let (dx, dy, dz) = (
+                    2 * x as i64 + 1 - n as i64,
+                    2 * y as i64 + 1 - n as i64,
+                    2 * z as i64 + 1 - n as i64,
+                );
                 let s = dx * dx + dy * dy + dz * dz;
                 let field = (s - rd * rd).abs() / n as i64;
-                for (a, (nx, ny, nz)) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)].into_iter().enumerate() {
+                for (a, (nx, ny, nz)) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)]
+                    .into_iter()
+                    .enumerate()
+                {
                     if nx < n && ny < n && nz < n {
                         let w = 1 + field.min(200) as u64 + splitmix64(3 * i as u64 + a as u64) % 8;
                         g.add_edge(i, idx(nx, ny, nz), w as f32, w as f32);
@@ -26,11 +33,15 @@ pub fn fixture_graph(n: usize) -> Graph {
                 }
                 let border = [x, y, z].iter().any(|&c| c == 0 || c == n - 1);
                 let source = if border { 1_000_000_000.0 } else { 0.0 };
-                let sink = 1.0 + if s < (rd / 2) * (rd / 2) { 1_000_000_000.0 } else { 0.0 };
+                let sink = 1.0
+                    + if s < (rd / 2) * (rd / 2) {
+                        1_000_000_000.0
+                    } else {
+                        0.0
+                    };
                 g.add_terminal_weights(i, source, sink);
             }
         }
     }
     g
 }
-

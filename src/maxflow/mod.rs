@@ -32,14 +32,26 @@ pub struct Graph {
     flow: f64,
     // Built by `maxflow`:
     first: Vec<u32>,
-    head: Vec<u32>,
-    sister: Vec<u32>,
-    r_cap: Vec<f32>,
-    parent: Vec<u32>,
-    is_sink: Vec<bool>,
-    next_active: Vec<u32>,
-    ts: Vec<u32>,
-    dist: Vec<u32>,
+    arcs: Vec<Arc>,
+    nodes: Vec<Node>,
+}
+
+/// An arc, with what the inner loops read together kept together.
+#[derive(Clone, Copy, Default)]
+struct Arc {
+    head: u32,
+    sister: u32,
+    r_cap: f32,
+}
+
+/// Per-node search state (one cache line holds two nodes).
+#[derive(Clone, Copy)]
+struct Node {
+    parent: u32,
+    next: u32,
+    ts: u32,
+    dist: u32,
+    is_sink: bool,
 }
 
 /// Progress report of a long cut: called with the flow so far and the augmentations done.
@@ -55,14 +67,8 @@ impl Graph {
             tr_cap: vec![0.0; n],
             flow: 0.0,
             first: Vec::new(),
-            head: Vec::new(),
-            sister: Vec::new(),
-            r_cap: Vec::new(),
-            parent: Vec::new(),
-            is_sink: Vec::new(),
-            next_active: Vec::new(),
-            ts: Vec::new(),
-            dist: Vec::new(),
+            arcs: Vec::new(),
+            nodes: Vec::new(),
         }
     }
 
@@ -110,24 +116,26 @@ impl Graph {
         }
         let m = first[n] as usize;
         let mut fill = first.clone();
-        let (mut head, mut sister, mut r_cap) = (vec![0u32; m], vec![0u32; m], vec![0f32; m]);
+        let mut arcs = vec![Arc::default(); m];
         for &(i, j, c, rc) in &self.edges {
             let a = fill[i as usize];
             fill[i as usize] += 1;
             let b = fill[j as usize];
             fill[j as usize] += 1;
-            head[a as usize] = j;
-            r_cap[a as usize] = c;
-            sister[a as usize] = b;
-            head[b as usize] = i;
-            r_cap[b as usize] = rc;
-            sister[b as usize] = a;
+            arcs[a as usize] = Arc {
+                head: j,
+                sister: b,
+                r_cap: c,
+            };
+            arcs[b as usize] = Arc {
+                head: i,
+                sister: a,
+                r_cap: rc,
+            };
         }
         self.edges = Vec::new();
         self.first = first;
-        self.head = head;
-        self.sister = sister;
-        self.r_cap = r_cap;
+        self.arcs = arcs;
     }
 
     /// Computes the maximum flow (the minimum cut's capacity).
@@ -139,18 +147,23 @@ impl Graph {
     pub fn maxflow_with_progress(&mut self, progress: Progress) -> f64 {
         self.build();
         let n = self.n;
-        self.parent = vec![NONE; n];
-        self.is_sink = vec![false; n];
-        self.next_active = vec![NONE; n];
-        self.ts = vec![0; n];
-        self.dist = vec![0; n];
+        self.nodes = vec![
+            Node {
+                parent: NONE,
+                next: NONE,
+                ts: 0,
+                dist: 0,
+                is_sink: false,
+            };
+            n
+        ];
         let mut queue = ActiveQueue::default();
         for i in 0..n {
             if self.tr_cap[i] != 0.0 {
-                self.is_sink[i] = self.tr_cap[i] < 0.0;
-                self.parent[i] = TERMINAL;
-                self.dist[i] = 1;
-                queue.push(&mut self.next_active, i as u32);
+                self.nodes[i].is_sink = self.tr_cap[i] < 0.0;
+                self.nodes[i].parent = TERMINAL;
+                self.nodes[i].dist = 1;
+                queue.push(&mut self.nodes, i as u32);
             }
         }
         let mut time: u32 = 0;
@@ -160,13 +173,13 @@ impl Graph {
         loop {
             let mut i = current;
             if i != NONE {
-                self.next_active[i as usize] = NONE; // removes the active mark
-                if self.parent[i as usize] == NONE {
+                self.nodes[i as usize].next = NONE; // removes the active mark
+                if self.nodes[i as usize].parent == NONE {
                     i = NONE;
                 }
             }
             if i == NONE {
-                match queue.pop(&mut self.next_active, &self.parent) {
+                match queue.pop(&mut self.nodes) {
                     Some(k) => i = k,
                     None => break,
                 }
@@ -175,43 +188,47 @@ impl Graph {
             // Growth.
             let mut middle = NONE;
             let (a0, a1) = (self.first[iu] as usize, self.first[iu + 1] as usize);
-            if !self.is_sink[iu] {
+            if !self.nodes[iu].is_sink {
                 for a in a0..a1 {
-                    if self.r_cap[a] > 0.0 {
-                        let j = self.head[a] as usize;
-                        if self.parent[j] == NONE {
-                            self.is_sink[j] = false;
-                            self.parent[j] = self.sister[a];
-                            self.ts[j] = self.ts[iu];
-                            self.dist[j] = self.dist[iu] + 1;
-                            queue.push(&mut self.next_active, j as u32);
-                        } else if self.is_sink[j] {
+                    if self.arcs[a].r_cap > 0.0 {
+                        let j = self.arcs[a].head as usize;
+                        if self.nodes[j].parent == NONE {
+                            self.nodes[j].is_sink = false;
+                            self.nodes[j].parent = self.arcs[a].sister;
+                            self.nodes[j].ts = self.nodes[iu].ts;
+                            self.nodes[j].dist = self.nodes[iu].dist + 1;
+                            queue.push(&mut self.nodes, j as u32);
+                        } else if self.nodes[j].is_sink {
                             middle = a as u32;
                             break;
-                        } else if self.ts[j] <= self.ts[iu] && self.dist[j] > self.dist[iu] {
-                            self.parent[j] = self.sister[a];
-                            self.ts[j] = self.ts[iu];
-                            self.dist[j] = self.dist[iu] + 1;
+                        } else if self.nodes[j].ts <= self.nodes[iu].ts
+                            && self.nodes[j].dist > self.nodes[iu].dist
+                        {
+                            self.nodes[j].parent = self.arcs[a].sister;
+                            self.nodes[j].ts = self.nodes[iu].ts;
+                            self.nodes[j].dist = self.nodes[iu].dist + 1;
                         }
                     }
                 }
             } else {
                 for a in a0..a1 {
-                    if self.r_cap[self.sister[a] as usize] > 0.0 {
-                        let j = self.head[a] as usize;
-                        if self.parent[j] == NONE {
-                            self.is_sink[j] = true;
-                            self.parent[j] = self.sister[a];
-                            self.ts[j] = self.ts[iu];
-                            self.dist[j] = self.dist[iu] + 1;
-                            queue.push(&mut self.next_active, j as u32);
-                        } else if !self.is_sink[j] {
-                            middle = self.sister[a];
+                    if self.arcs[self.arcs[a].sister as usize].r_cap > 0.0 {
+                        let j = self.arcs[a].head as usize;
+                        if self.nodes[j].parent == NONE {
+                            self.nodes[j].is_sink = true;
+                            self.nodes[j].parent = self.arcs[a].sister;
+                            self.nodes[j].ts = self.nodes[iu].ts;
+                            self.nodes[j].dist = self.nodes[iu].dist + 1;
+                            queue.push(&mut self.nodes, j as u32);
+                        } else if !self.nodes[j].is_sink {
+                            middle = self.arcs[a].sister;
                             break;
-                        } else if self.ts[j] <= self.ts[iu] && self.dist[j] > self.dist[iu] {
-                            self.parent[j] = self.sister[a];
-                            self.ts[j] = self.ts[iu];
-                            self.dist[j] = self.dist[iu] + 1;
+                        } else if self.nodes[j].ts <= self.nodes[iu].ts
+                            && self.nodes[j].dist > self.nodes[iu].dist
+                        {
+                            self.nodes[j].parent = self.arcs[a].sister;
+                            self.nodes[j].ts = self.nodes[iu].ts;
+                            self.nodes[j].dist = self.nodes[iu].dist + 1;
                         }
                     }
                 }
@@ -219,7 +236,7 @@ impl Graph {
             time = time.wrapping_add(1);
             if middle != NONE {
                 // Keep growing from this node next time.
-                self.next_active[iu] = i;
+                self.nodes[iu].next = i;
                 current = i;
                 self.augment(middle as usize, &mut orphans);
                 augmentations += 1;
@@ -227,7 +244,7 @@ impl Graph {
                     progress(self.flow, augmentations);
                 }
                 while let Some(o) = orphans.pop_front() {
-                    if self.is_sink[o as usize] {
+                    if self.nodes[o as usize].is_sink {
                         self.adopt_sink_orphan(o as usize, time, &mut orphans, &mut queue);
                     } else {
                         self.adopt_source_orphan(o as usize, time, &mut orphans, &mut queue);
@@ -243,73 +260,75 @@ impl Graph {
     /// Saturates the path through arc `middle` (source-tree tail to sink-tree head).
     fn augment(&mut self, middle: usize, orphans: &mut VecDeque<u32>) {
         // Bottleneck.
-        let mut bottleneck = self.r_cap[middle] as f64;
-        let mut i = self.head[self.sister[middle] as usize] as usize;
+        let mut bottleneck = self.arcs[middle].r_cap as f64;
+        let mut i = self.arcs[self.arcs[middle].sister as usize].head as usize;
         loop {
-            let a = self.parent[i];
+            let a = self.nodes[i].parent;
             if a == TERMINAL {
                 break;
             }
-            bottleneck = bottleneck.min(self.r_cap[self.sister[a as usize] as usize] as f64);
-            i = self.head[a as usize] as usize;
+            bottleneck =
+                bottleneck.min(self.arcs[self.arcs[a as usize].sister as usize].r_cap as f64);
+            i = self.arcs[a as usize].head as usize;
         }
         bottleneck = bottleneck.min(self.tr_cap[i]);
-        let mut i = self.head[middle] as usize;
+        let mut i = self.arcs[middle].head as usize;
         loop {
-            let a = self.parent[i];
+            let a = self.nodes[i].parent;
             if a == TERMINAL {
                 break;
             }
-            bottleneck = bottleneck.min(self.r_cap[a as usize] as f64);
-            i = self.head[a as usize] as usize;
+            bottleneck = bottleneck.min(self.arcs[a as usize].r_cap as f64);
+            i = self.arcs[a as usize].head as usize;
         }
         bottleneck = bottleneck.min(-self.tr_cap[i]);
         let b = bottleneck as f32;
         // Augmentation.
-        self.r_cap[self.sister[middle] as usize] += b;
-        self.r_cap[middle] -= b;
-        let mut i = self.head[self.sister[middle] as usize] as usize;
+        let middle_sister = self.arcs[middle].sister as usize;
+        self.arcs[middle_sister].r_cap += b;
+        self.arcs[middle].r_cap -= b;
+        let mut i = self.arcs[self.arcs[middle].sister as usize].head as usize;
         loop {
-            let a = self.parent[i];
+            let a = self.nodes[i].parent;
             if a == TERMINAL {
                 break;
             }
-            let (au, su) = (a as usize, self.sister[a as usize] as usize);
-            self.r_cap[au] += b;
-            self.r_cap[su] -= b;
-            if self.r_cap[su] <= 0.0 {
-                self.r_cap[su] = 0.0;
-                self.parent[i] = ORPHAN;
+            let (au, su) = (a as usize, self.arcs[a as usize].sister as usize);
+            self.arcs[au].r_cap += b;
+            self.arcs[su].r_cap -= b;
+            if self.arcs[su].r_cap <= 0.0 {
+                self.arcs[su].r_cap = 0.0;
+                self.nodes[i].parent = ORPHAN;
                 orphans.push_front(i as u32);
             }
-            i = self.head[au] as usize;
+            i = self.arcs[au].head as usize;
         }
         self.tr_cap[i] -= bottleneck;
         if self.tr_cap[i] <= 0.0 {
             self.tr_cap[i] = 0.0;
-            self.parent[i] = ORPHAN;
+            self.nodes[i].parent = ORPHAN;
             orphans.push_front(i as u32);
         }
-        let mut i = self.head[middle] as usize;
+        let mut i = self.arcs[middle].head as usize;
         loop {
-            let a = self.parent[i];
+            let a = self.nodes[i].parent;
             if a == TERMINAL {
                 break;
             }
-            let (au, su) = (a as usize, self.sister[a as usize] as usize);
-            self.r_cap[su] += b;
-            self.r_cap[au] -= b;
-            if self.r_cap[au] <= 0.0 {
-                self.r_cap[au] = 0.0;
-                self.parent[i] = ORPHAN;
+            let (au, su) = (a as usize, self.arcs[a as usize].sister as usize);
+            self.arcs[su].r_cap += b;
+            self.arcs[au].r_cap -= b;
+            if self.arcs[au].r_cap <= 0.0 {
+                self.arcs[au].r_cap = 0.0;
+                self.nodes[i].parent = ORPHAN;
                 orphans.push_front(i as u32);
             }
-            i = self.head[au] as usize;
+            i = self.arcs[au].head as usize;
         }
         self.tr_cap[i] += bottleneck;
         if self.tr_cap[i] >= 0.0 {
             self.tr_cap[i] = 0.0;
-            self.parent[i] = ORPHAN;
+            self.nodes[i].parent = ORPHAN;
             orphans.push_front(i as u32);
         }
         self.flow += bottleneck;
@@ -321,56 +340,79 @@ impl Graph {
         let mut j = start;
         let mut d: u32 = 0;
         loop {
-            if self.ts[j] == time {
-                d += self.dist[j];
+            if self.nodes[j].ts == time {
+                d += self.nodes[j].dist;
                 break;
             }
-            let a = self.parent[j];
+            let a = self.nodes[j].parent;
             d += 1;
             if a == TERMINAL {
-                self.ts[j] = time;
-                self.dist[j] = 1;
+                self.nodes[j].ts = time;
+                self.nodes[j].dist = 1;
                 break;
             }
             if a == ORPHAN {
                 return INFINITE_D;
             }
-            j = self.head[a as usize] as usize;
+            j = self.arcs[a as usize].head as usize;
         }
         // Set marks along the path.
         let mut j = start;
         let mut dd = d;
-        while self.ts[j] != time {
-            self.ts[j] = time;
-            self.dist[j] = dd;
+        while self.nodes[j].ts != time {
+            self.nodes[j].ts = time;
+            self.nodes[j].dist = dd;
             dd -= 1;
-            j = self.head[self.parent[j] as usize] as usize;
+            j = self.arcs[self.nodes[j].parent as usize].head as usize;
         }
         d
     }
 
-    fn adopt_source_orphan(&mut self, i: usize, time: u32, orphans: &mut VecDeque<u32>, queue: &mut ActiveQueue) {
+    fn adopt_source_orphan(
+        &mut self,
+        i: usize,
+        time: u32,
+        orphans: &mut VecDeque<u32>,
+        queue: &mut ActiveQueue,
+    ) {
         self.adopt(i, time, orphans, queue, false);
     }
 
-    fn adopt_sink_orphan(&mut self, i: usize, time: u32, orphans: &mut VecDeque<u32>, queue: &mut ActiveQueue) {
+    fn adopt_sink_orphan(
+        &mut self,
+        i: usize,
+        time: u32,
+        orphans: &mut VecDeque<u32>,
+        queue: &mut ActiveQueue,
+    ) {
         self.adopt(i, time, orphans, queue, true);
     }
 
     /// Adoption of orphan `i` of the source tree (`sink == false`) or the sink tree.
-    fn adopt(&mut self, i: usize, time: u32, orphans: &mut VecDeque<u32>, queue: &mut ActiveQueue, sink: bool) {
+    fn adopt(
+        &mut self,
+        i: usize,
+        time: u32,
+        orphans: &mut VecDeque<u32>,
+        queue: &mut ActiveQueue,
+        sink: bool,
+    ) {
         let (a0, a1) = (self.first[i] as usize, self.first[i + 1] as usize);
         let mut best_arc = NONE;
         let mut best_d = INFINITE_D;
         for a in a0..a1 {
             // A source-tree parent must send flow to i (residual j -> i, the sister of a);
             // a sink-tree parent must receive flow from i (residual i -> j, arc a).
-            let residual = if sink { self.r_cap[a] } else { self.r_cap[self.sister[a] as usize] };
+            let residual = if sink {
+                self.arcs[a].r_cap
+            } else {
+                self.arcs[self.arcs[a].sister as usize].r_cap
+            };
             if residual <= 0.0 {
                 continue;
             }
-            let j = self.head[a] as usize;
-            if self.is_sink[j] == sink && self.parent[j] != NONE {
+            let j = self.arcs[a].head as usize;
+            if self.nodes[j].is_sink == sink && self.nodes[j].parent != NONE {
                 let d = self.origin_distance(j, time);
                 if d < best_d {
                     best_d = d;
@@ -379,24 +421,28 @@ impl Graph {
             }
         }
         if best_arc != NONE {
-            self.parent[i] = best_arc;
-            self.ts[i] = time;
-            self.dist[i] = best_d + 1;
+            self.nodes[i].parent = best_arc;
+            self.nodes[i].ts = time;
+            self.nodes[i].dist = best_d + 1;
             return;
         }
         // No parent found: i becomes free; its children become orphans, and neighbours that
         // could reach it become active again.
-        self.parent[i] = NONE;
+        self.nodes[i].parent = NONE;
         for a in a0..a1 {
-            let j = self.head[a] as usize;
-            let pj = self.parent[j];
-            if self.is_sink[j] == sink && pj != NONE {
-                let residual = if sink { self.r_cap[a] } else { self.r_cap[self.sister[a] as usize] };
+            let j = self.arcs[a].head as usize;
+            let pj = self.nodes[j].parent;
+            if self.nodes[j].is_sink == sink && pj != NONE {
+                let residual = if sink {
+                    self.arcs[a].r_cap
+                } else {
+                    self.arcs[self.arcs[a].sister as usize].r_cap
+                };
                 if residual > 0.0 {
-                    queue.push(&mut self.next_active, j as u32);
+                    queue.push(&mut self.nodes, j as u32);
                 }
-                if pj != TERMINAL && pj != ORPHAN && self.head[pj as usize] as usize == i {
-                    self.parent[j] = ORPHAN;
+                if pj != TERMINAL && pj != ORPHAN && self.arcs[pj as usize].head as usize == i {
+                    self.nodes[j].parent = ORPHAN;
                     orphans.push_back(j as u32);
                 }
             }
@@ -406,11 +452,11 @@ impl Graph {
     /// After [`Graph::maxflow`]: whether node `i` is on the source side of the minimum cut
     /// (reachable from the source in the residual graph).
     pub fn is_source_side(&self, i: usize) -> bool {
-        self.parent[i] != NONE && !self.is_sink[i]
+        self.nodes[i].parent != NONE && !self.nodes[i].is_sink
     }
 }
 
-/// FIFO of active nodes threaded through `next_active` (a node's entry is `NONE` when it is
+/// FIFO of active nodes threaded through `Node::next` (a node's entry is `NONE` when it is
 /// not queued, itself when it is the last).
 #[derive(Default)]
 struct ActiveQueue {
@@ -419,25 +465,25 @@ struct ActiveQueue {
 }
 
 impl ActiveQueue {
-    fn push(&mut self, next: &mut [u32], i: u32) {
-        if next[i as usize] != NONE {
+    fn push(&mut self, nodes: &mut [Node], i: u32) {
+        if nodes[i as usize].next != NONE {
             return; // already queued (or the current node)
         }
-        next[i as usize] = i;
+        nodes[i as usize].next = i;
         match self.first {
             None => self.first = Some(i),
-            Some(_) => next[self.last as usize] = i,
+            Some(_) => nodes[self.last as usize].next = i,
         }
         self.last = i;
     }
 
     /// Next queued node that is still in a tree.
-    fn pop(&mut self, next: &mut [u32], parent: &[u32]) -> Option<u32> {
+    fn pop(&mut self, nodes: &mut [Node]) -> Option<u32> {
         while let Some(i) = self.first {
-            let n = next[i as usize];
+            let n = nodes[i as usize].next;
             self.first = if n == i { None } else { Some(n) };
-            next[i as usize] = NONE;
-            if parent[i as usize] != NONE {
+            nodes[i as usize].next = NONE;
+            if nodes[i as usize].parent != NONE {
                 return Some(i);
             }
         }

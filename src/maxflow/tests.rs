@@ -62,7 +62,10 @@ fn random_graphs_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
         let mut g = Graph::new(n);
         let edges = rng.next_u64() % (3 * n as u64 + 1);
         for _ in 0..edges {
-            let (i, j) = ((rng.next_u64() % n as u64) as usize, (rng.next_u64() % n as u64) as usize);
+            let (i, j) = (
+                (rng.next_u64() % n as u64) as usize,
+                (rng.next_u64() % n as u64) as usize,
+            );
             if i == j {
                 continue;
             }
@@ -73,7 +76,10 @@ fn random_graphs_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
         }
         for i in 0..n {
             let (cs, ct) = ((rng.next_u64() % 12) as f64, (rng.next_u64() % 12) as f64);
-            let (cs, ct) = (if rng.uniform() < 0.5 { 0.0 } else { cs }, if rng.uniform() < 0.5 { 0.0 } else { ct });
+            let (cs, ct) = (
+                if rng.uniform() < 0.5 { 0.0 } else { cs },
+                if rng.uniform() < 0.5 { 0.0 } else { ct },
+            );
             g.add_terminal_weights(i, cs, ct);
             cap[n][i] += cs;
             cap[i][n + 1] += ct;
@@ -82,7 +88,10 @@ fn random_graphs_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
         let flow = g.maxflow();
         assert_eq!(flow, reference, "trial {trial}");
         // The cut between the source side and the rest carries exactly the flow.
-        let side: Vec<bool> = (0..n).map(|i| g.is_source_side(i)).chain([true, false]).collect();
+        let side: Vec<bool> = (0..n)
+            .map(|i| g.is_source_side(i))
+            .chain([true, false])
+            .collect();
         let mut cut = 0.0;
         for u in 0..n + 2 {
             for v in 0..n + 2 {
