@@ -24,11 +24,7 @@ fn best_of<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 /// `cube = Some(n)` the grid is n^3 voxels centred on the derived box (for comparisons on a
 /// fixed grid size).
 pub fn visual_hull(job: &Job, frame: u32, repeat: usize, cube: Option<usize>) -> Result<String> {
-    let ctx = crate::stages::Context {
-        config: &job.config,
-        sequence: &job.sequence,
-        cache: &job.cache,
-    };
+    let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let cams = &job.sequence.cameras;
     let p = &job.config.visual_hull;
@@ -122,4 +118,51 @@ pub fn maxflow_fixture(n: usize) -> String {
         .filter(|&i| !g.is_source_side(i))
         .count();
     format!("maxflow fixture n={n}: flow {flow}, build {build:.3} s, solve {solve:.3} s, sink side {sink_side} nodes\n")
+}
+
+/// Times the graph-cut stage's steps on one frame (needs its hull in the cache).
+pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
+    use crate::stages::graphcut as gc;
+    let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
+    let cams = &job.sequence.cameras;
+    let p = &job.config.graphcut;
+    let t = Instant::now();
+    let (grid, sdf) = crate::stages::load_grid(&ctx, "visual_hull", frame)?;
+    let (ply, _) = crate::stages::hull_files(frame);
+    let hull = crate::geometry::ply::read_ply(&job.cache.stage_dir("visual_hull").join(ply))?;
+    use rayon::prelude::*;
+    let frames: Vec<image::RgbImage> = (0..cams.len())
+        .into_par_iter()
+        .map(|c| job.sequence.load_frame(c, frame))
+        .collect::<Result<_>>()?;
+    let t_load = t.elapsed().as_secs_f64();
+    let (t_depth, depth) = best_of(1, || gc::depth_maps(cams, &hull, grid.voxel));
+    let (t_grey, images) = best_of(1, || gc::grey(&frames));
+    let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
+    let mut timings = gc::Timings::default();
+    let t = Instant::now();
+    let refined = gc::refine_timed(
+        &grid,
+        &occupied,
+        &sdf,
+        cams,
+        &images,
+        &depth,
+        p,
+        &mut |_, _| {},
+        &mut timings,
+    );
+    let t_refine = t.elapsed().as_secs_f64();
+    let (t_mesh, _) = best_of(1, || gc::mesh(&grid, &refined, p.smoothing_iterations));
+    Ok(format!(
+        "graph cut, frame {frame}: {} band voxels\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n",
+        timings.band_voxels,
+        "load hull and frames", t_load * 1e3,
+        "hull depth maps", t_depth * 1e3,
+        "grey images", t_grey * 1e3,
+        "photo-consistency", timings.photo * 1e3,
+        "graph and max-flow", timings.cut * 1e3,
+        "refine total", t_refine * 1e3,
+        "mesh", t_mesh * 1e3,
+    ))
 }

@@ -2,6 +2,7 @@
 //! file. Unknown keys and wrong types are errors naming the key and the line.
 
 use crate::error::{Error, Result};
+use crate::stages::graphcut::{self, GraphcutParams};
 use crate::stages::silhouette::SilhouetteParams;
 use crate::stages::visual_hull::{self, VisualHullParams};
 use serde::Deserialize;
@@ -56,6 +57,8 @@ struct PipelineFile {
     silhouette: SilhouetteParams,
     #[serde(default)]
     visual_hull: VisualHullParams,
+    #[serde(default)]
+    graphcut: GraphcutParams,
 }
 
 fn default_cache() -> PathBuf {
@@ -85,6 +88,8 @@ pub struct Config {
     pub silhouette: SilhouetteParams,
     /// Stage 2 parameters.
     pub visual_hull: VisualHullParams,
+    /// Stage 3 parameters.
+    pub graphcut: GraphcutParams,
 }
 
 impl Config {
@@ -108,7 +113,9 @@ impl Config {
             output: base.join(&file.output),
             silhouette: file.silhouette,
             visual_hull: file.visual_hull,
+            graphcut: file.graphcut,
         };
+        graphcut::validate(&config.graphcut).map_err(|m| Error::invalid(path, m))?;
         visual_hull::validate(&config.visual_hull).map_err(|m| Error::invalid(path, m))?;
         for (key, p, dir) in [
             ("calibration", &config.calibration, false),

@@ -78,7 +78,7 @@ pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TriMesh) -> 
 }
 
 /// Reconstruction stages the evaluation knows: (stage, mesh file, grid file) per frame.
-const RECON_STAGES: &[&str] = &["visual_hull"];
+const RECON_STAGES: &[&str] = &["visual_hull", "graphcut"];
 
 /// Evaluates every cached reconstruction of the job's frames against the true meshes.
 pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
@@ -128,11 +128,7 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
 /// reconstruction's mesh, projected through the camera, covers (1 when the mesh explains
 /// every silhouette pixel; a conservative hull scores about 1 with a correct calibration).
 pub fn reprojection_coverage(job: &Job, stage: &str, frame: u32) -> Result<Vec<(String, f64)>> {
-    let ctx = crate::stages::Context {
-        config: &job.config,
-        sequence: &job.sequence,
-        cache: &job.cache,
-    };
+    let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let (ply, _) = crate::stages::hull_files(frame);
     let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;

@@ -124,6 +124,12 @@ enum BenchWhat {
         #[arg(long)]
         cube: Option<usize>,
     },
+    /// The graph cut's steps on one frame (needs the frame's hull in the cache).
+    Graphcut {
+        file: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        frame: u32,
+    },
     /// The max-flow solver on the reference fixture graph of size N^3.
     Maxflow {
         #[arg(long, default_value_t = 64)]
@@ -233,6 +239,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "{}",
                     hullpose::bench::visual_hull(&job, frame, repeat, cube)?
                 );
+            }
+            BenchWhat::Graphcut { file, frame } => {
+                let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
+                print!("{}", hullpose::bench::graphcut(&job, frame)?);
             }
             BenchWhat::Maxflow { size } => print!("{}", hullpose::bench::maxflow_fixture(size)),
             BenchWhat::Meshing { size, repeat } => {

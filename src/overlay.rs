@@ -83,11 +83,7 @@ pub fn hull_beside_frame(job: &Job, frame: u32, camera: Option<&str>) -> Result<
                 ))
             })?,
     };
-    let ctx = crate::stages::Context {
-        config: &job.config,
-        sequence: seq,
-        cache: &job.cache,
-    };
+    let ctx = crate::stages::Context::new(&job.config, seq, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let (ply, _) = crate::stages::hull_files(frame);
     let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir("visual_hull").join(ply))?;

@@ -90,11 +90,7 @@ impl Job {
     }
 
     fn context(&self) -> Context<'_> {
-        Context {
-            config: &self.config,
-            sequence: &self.sequence,
-            cache: &self.cache,
-        }
+        Context::new(&self.config, &self.sequence, &self.cache)
     }
 
     /// Cache keys of every stage for every selected frame.

@@ -4,6 +4,7 @@
 //! The algorithms live in one module per stage as plain functions on typed data; the
 //! [`StageDef`] adapters here do the file handling around them.
 
+pub mod graphcut;
 pub mod silhouette;
 pub mod visual_hull;
 
@@ -13,6 +14,7 @@ use crate::dataset::{frame_stem, Sequence};
 use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
+use rayon::prelude::*;
 use silhouette::SilhouetteMethod;
 
 /// Everything a stage may read for one run.
@@ -20,6 +22,16 @@ pub struct Context<'a> {
     pub config: &'a Config,
     pub sequence: &'a Sequence,
     pub cache: &'a Cache,
+}
+
+impl<'a> Context<'a> {
+    pub fn new(config: &'a Config, sequence: &'a Sequence, cache: &'a Cache) -> Context<'a> {
+        Context {
+            config,
+            sequence,
+            cache,
+        }
+    }
 }
 
 /// A stage as the runner sees it.
@@ -67,6 +79,15 @@ pub const STAGES: &[StageDef] = &[
         params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
         sources: visual_hull_sources,
         compute: visual_hull_compute,
+    },
+    StageDef {
+        name: "graphcut",
+        about: "graph-cut multi-view stereo refinement of the hull",
+        inputs: &["visual_hull"],
+        format_version: 1,
+        params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
+        sources: graphcut_sources,
+        compute: graphcut_compute,
     },
 ];
 
@@ -152,7 +173,8 @@ fn visual_hull_sources(ctx: &Context, _frame: u32, key: &mut KeyBuilder) -> Resu
     Ok(())
 }
 
-/// Paths of the visual hull's artifacts of a frame, relative to the stage folder.
+/// Paths of a reconstruction stage's artifacts of a frame (mesh, grid), relative to its
+/// stage folder.
 pub fn hull_files(frame: u32) -> (String, String) {
     let stem = frame_stem(frame);
     (format!("{stem}.ply"), format!("{stem}.grid"))
@@ -220,4 +242,81 @@ pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImag
                 .to_luma8())
         })
         .collect()
+}
+
+fn graphcut_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result<()> {
+    key.add_file(&ctx.config.calibration)?;
+    for c in 0..ctx.sequence.cameras.len() {
+        key.add_file(&ctx.sequence.frame_path(c, frame))?;
+    }
+    Ok(())
+}
+
+/// Reads a reconstruction stage's cached grid and signed distance.
+pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Vec<f32>)> {
+    let (_, grid) = hull_files(frame);
+    let path = ctx.cache.stage_dir(stage).join(grid);
+    let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    visual_hull::parse_grid(&path, &data)
+}
+
+fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
+    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
+    let p = &ctx.config.graphcut;
+    let (grid, sdf) = load_grid(ctx, "visual_hull", frame)?;
+    let (ply, grid_file) = hull_files(frame);
+    let dir = ctx.cache.stage_dir("graphcut");
+    let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
+    if !occupied.iter().any(|&o| o) {
+        // An empty hull stays empty.
+        write_ply(
+            &dir.join(&ply),
+            &TriMesh::default(),
+            &VertexAttributes::default(),
+            PlyFormat::BinaryLittleEndian,
+        )?;
+        crate::fsutil::write_atomic(&dir.join(&grid_file), &visual_hull::grid_bytes(&grid, &sdf))?;
+        return Ok(Output {
+            files: vec![ply, grid_file],
+            warnings: vec![format!("frame {frame}: the hull is empty")],
+        });
+    }
+    let hull = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
+    let cams = &ctx.sequence.cameras;
+    let depth = graphcut::depth_maps(cams, &hull, grid.voxel);
+    let frames: Vec<image::RgbImage> = (0..cams.len())
+        .into_par_iter()
+        .map(|c| ctx.sequence.load_frame(c, frame))
+        .collect::<Result<_>>()?;
+    let images = graphcut::grey(&frames);
+    let refined = graphcut::refine(
+        &grid,
+        &occupied,
+        &sdf,
+        cams,
+        &images,
+        &depth,
+        p,
+        &mut |_, _| {},
+    );
+    let (refined_sdf, mesh) = graphcut::mesh(&grid, &refined, p.smoothing_iterations);
+    let normals = mesh.vertex_normals();
+    let attrs = VertexAttributes {
+        normals: Some(&normals),
+        ..Default::default()
+    };
+    write_ply(
+        &dir.join(&ply),
+        &mesh,
+        &attrs,
+        PlyFormat::BinaryLittleEndian,
+    )?;
+    crate::fsutil::write_atomic(
+        &dir.join(&grid_file),
+        &visual_hull::grid_bytes(&grid, &refined_sdf),
+    )?;
+    Ok(Output {
+        files: vec![ply, grid_file],
+        warnings: Vec::new(),
+    })
 }

@@ -1,0 +1,375 @@
+//! Stage 3, graph-cut multi-view stereo refinement of the hull (method.md "Stage 3", after
+//! Vogiatzis, Torr and Cipolla, CVPR 2005).
+//!
+//! - **Band**: the hull voxels within `band` metres of the hull surface (from the hull's
+//!   signed distance). They are the graph's nodes; every other voxel keeps its hull label.
+//! - **Visibility** of a band voxel x: the cameras that see the nearest hull surface point
+//!   p = x - sdf(x) * n (n the unit gradient of the signed distance): p faces the camera
+//!   (n . (c - p) > 0) and the camera's depth map of the hull mesh (splatted vertices) is not
+//!   closer than p by more than 1.5 voxels.
+//! - **Photo-consistency** C(x) in [-1, 1]: normalized cross-correlation of `window` x
+//!   `window` pixel patches (bilinear, grey) around x's projections, over pairs of visible
+//!   cameras whose viewing directions differ by at most `max_pair_angle_deg`; C is the mean
+//!   of the best `best_pairs` pairs. Without such a pair, C = -1 (flat cost).
+//! - **Cost** rho(x) = 1 - exp(-tan^2(pi/4 (C(x) - 1)) / sigma^2): 0 where the images agree
+//!   perfectly, 1 where they disagree or nothing sees x.
+//! - **Graph**: 6-neighbour edges of weight (4 pi / 3) h^2 (rho_i + rho_j) / 2 (h the voxel
+//!   size; the 4 pi / 3 factor makes the cut's cost approximate the surface integral of rho,
+//!   Boykov and Kolmogorov ICCV 2003). A band voxel next to an outside voxel is linked to the
+//!   source (outside) with that face's weight, next to a deeper hull voxel to the sink
+//!   (inside); every band voxel gets a ballooning link lambda h^3 to the sink, rewarding
+//!   enclosed volume so the minimal surface does not shrink.
+//! - **Cut**: Boykov-Kolmogorov max-flow; source-side band voxels are carved. Where no camera
+//!   pair sees the surface, rho is flat and the ballooning keeps the hull's shape (the
+//!   phantom volume stays, for stage 4 to flag).
+
+use crate::camera::Camera;
+use crate::geometry::grid::GridSpec;
+use crate::geometry::TriMesh;
+use crate::maxflow::Graph;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the graph-cut stage (pipeline.yaml key `graphcut`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GraphcutParams {
+    /// Band thickness inside the hull surface, metres. Default 0.05.
+    pub band: f64,
+    /// Patch edge, pixels (odd). Default 7.
+    pub window: usize,
+    /// Largest angle between two cameras' viewing directions for their patches to be
+    /// compared, degrees. Default 50.
+    pub max_pair_angle_deg: f64,
+    /// Number of best camera pairs averaged into C(x). Default 3.
+    pub best_pairs: usize,
+    /// Sharpness sigma of the cost mapping. Default 0.5.
+    pub sigma: f64,
+    /// Ballooning weight lambda, per metre (times h^3 per voxel). Default 150.
+    pub ballooning: f64,
+    /// Taubin smoothing iterations of the mesh. Default 10.
+    pub smoothing_iterations: usize,
+}
+
+impl Default for GraphcutParams {
+    fn default() -> Self {
+        GraphcutParams {
+            band: 0.05,
+            window: 7,
+            max_pair_angle_deg: 50.0,
+            best_pairs: 3,
+            sigma: 0.5,
+            ballooning: 150.0,
+            smoothing_iterations: 10,
+        }
+    }
+}
+
+/// Checks parameters that do not depend on the data.
+pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
+    if !(p.band > 0.0 && p.band.is_finite()) {
+        return Err(format!(
+            "graphcut.band must be a positive thickness in metres, got {}",
+            p.band
+        ));
+    }
+    if p.window < 3 || p.window % 2 == 0 || p.window > 31 {
+        return Err(format!(
+            "graphcut.window must be an odd number of pixels from 3 to 31, got {}",
+            p.window
+        ));
+    }
+    if !(p.sigma > 0.0) || p.ballooning < 0.0 || p.best_pairs == 0 {
+        return Err(
+            "graphcut: sigma must be positive, ballooning not negative, best_pairs at least 1"
+                .into(),
+        );
+    }
+    Ok(())
+}
+
+/// A grey image as f32 with bilinear sampling.
+pub struct GreyImage {
+    w: usize,
+    h: usize,
+    px: Vec<f32>,
+}
+
+impl GreyImage {
+    pub fn from_rgb(img: &image::RgbImage) -> GreyImage {
+        GreyImage {
+            w: img.width() as usize,
+            h: img.height() as usize,
+            px: img
+                .pixels()
+                .map(|p| 0.299 * p.0[0] as f32 + 0.587 * p.0[1] as f32 + 0.114 * p.0[2] as f32)
+                .collect(),
+        }
+    }
+
+    /// Bilinear sample at (x, y) pixels; `None` outside.
+    pub fn sample(&self, x: f64, y: f64) -> Option<f32> {
+        if x < 0.0 || y < 0.0 || x > (self.w - 1) as f64 || y > (self.h - 1) as f64 {
+            return None;
+        }
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.w - 1), (y0 + 1).min(self.h - 1));
+        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+        let p = |x: usize, y: usize| self.px[y * self.w + x];
+        Some(
+            (p(x0, y0) * (1.0 - fx) + p(x1, y0) * fx) * (1.0 - fy)
+                + (p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx) * fy,
+        )
+    }
+}
+
+/// Zero-mean normalized cross-correlation of two equally long samples (0 for flat ones).
+pub fn zncc(a: &[f32], b: &[f32]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (
+        a.iter().map(|&v| v as f64).sum::<f64>() / n,
+        b.iter().map(|&v| v as f64).sum::<f64>() / n,
+    );
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (&x, &y) in a.iter().zip(b) {
+        let (dx, dy) = (x as f64 - ma, y as f64 - mb);
+        ab += dx * dy;
+        aa += dx * dx;
+        bb += dy * dy;
+    }
+    if aa < 1e-6 || bb < 1e-6 {
+        return 0.0;
+    }
+    ab / (aa * bb).sqrt()
+}
+
+/// Depth maps of a closed mesh through every camera (metres along the optical axis;
+/// infinity where the mesh is not seen), by splatting its vertices: each vertex writes its
+/// depth over a square about as wide as `spacing` metres (the mesh's vertex spacing) appears
+/// at that depth. Cheaper than rasterizing and exact enough for a visibility test with a
+/// tolerance of more than a voxel.
+pub fn depth_maps(cams: &[Camera], mesh: &TriMesh, spacing: f64) -> Vec<Vec<f32>> {
+    cams.par_iter()
+        .map(|cam| {
+            let (w, h) = (cam.width as i64, cam.height as i64);
+            let mut depth = vec![f32::INFINITY; (w * h) as usize];
+            for v in &mesh.vertices {
+                let (px, z) = cam.project_with_depth(v);
+                if z <= 0.0 {
+                    continue;
+                }
+                let r = (0.75 * cam.fx.max(cam.fy) * spacing / z).ceil() as i64;
+                let (cx, cy) = (px.x.round() as i64, px.y.round() as i64);
+                for y in (cy - r).max(0)..=(cy + r).min(h - 1) {
+                    for x in (cx - r).max(0)..=(cx + r).min(w - 1) {
+                        let d = &mut depth[(y * w + x) as usize];
+                        *d = d.min(z as f32);
+                    }
+                }
+            }
+            depth
+        })
+        .collect()
+}
+
+/// The refined occupancy of one frame.
+#[allow(clippy::too_many_arguments)]
+pub fn refine(
+    grid: &GridSpec,
+    occupied: &[bool],
+    sdf: &[f32],
+    cams: &[Camera],
+    images: &[GreyImage],
+    depth: &[Vec<f32>],
+    p: &GraphcutParams,
+    progress: &mut dyn FnMut(f64, u64),
+) -> Vec<bool> {
+    refine_timed(
+        grid,
+        occupied,
+        sdf,
+        cams,
+        images,
+        depth,
+        p,
+        progress,
+        &mut Timings::default(),
+    )
+}
+
+/// Where [`refine`]'s time went (seconds), for benchmarks.
+#[derive(Debug, Default)]
+pub struct Timings {
+    pub band_voxels: usize,
+    pub photo: f64,
+    pub cut: f64,
+}
+
+/// [`refine`], recording [`Timings`].
+#[allow(clippy::too_many_arguments)]
+pub fn refine_timed(
+    grid: &GridSpec,
+    occupied: &[bool],
+    sdf: &[f32],
+    cams: &[Camera],
+    images: &[GreyImage],
+    depth: &[Vec<f32>],
+    p: &GraphcutParams,
+    progress: &mut dyn FnMut(f64, u64),
+    timings: &mut Timings,
+) -> Vec<bool> {
+    let start = std::time::Instant::now();
+    let h = grid.voxel;
+    // Band nodes.
+    let band: Vec<usize> = (0..grid.len())
+        .filter(|&i| occupied[i] && -(sdf[i] as f64) <= p.band)
+        .collect();
+    let mut node_of = vec![u32::MAX; grid.len()];
+    for (k, &i) in band.iter().enumerate() {
+        node_of[i] = k as u32;
+    }
+    // Cost per band voxel.
+    let rho: Vec<f64> = band
+        .par_iter()
+        .map(|&i| {
+            let [x, y, z] = grid.coords(i);
+            let c = photo_consistency(grid, sdf, cams, images, depth, p, &grid.centre(x, y, z));
+            let t = (std::f64::consts::FRAC_PI_4 * (c - 1.0)).tan();
+            1.0 - (-(t * t) / (p.sigma * p.sigma)).exp()
+        })
+        .collect();
+    timings.band_voxels = band.len();
+    timings.photo = start.elapsed().as_secs_f64();
+    let start = std::time::Instant::now();
+    let face = 4.0 * std::f64::consts::PI / 3.0 * h * h;
+    let mut g = Graph::new(band.len());
+    g.reserve_edges(3 * band.len());
+    let [nx, ny, nz] = grid.dims;
+    for (k, &i) in band.iter().enumerate() {
+        let [x, y, z] = grid.coords(i);
+        let mut source = 0.0;
+        let mut sink = p.ballooning * h * h * h;
+        for (dx, dy, dz) in [
+            (1i64, 0i64, 0i64),
+            (-1, 0, 0),
+            (0, 1, 0),
+            (0, -1, 0),
+            (0, 0, 1),
+            (0, 0, -1),
+        ] {
+            let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+            let outside_grid =
+                a < 0 || b < 0 || c < 0 || a >= nx as i64 || b >= ny as i64 || c >= nz as i64;
+            let j = if outside_grid {
+                usize::MAX
+            } else {
+                grid.index(a as usize, b as usize, c as usize)
+            };
+            if outside_grid || !occupied[j] {
+                source += face * rho[k];
+            } else if node_of[j] == u32::MAX {
+                sink += face * rho[k];
+            } else if (dx, dy, dz) > (0, 0, 0) {
+                let w = (face * (rho[k] + rho[node_of[j] as usize]) / 2.0) as f32;
+                g.add_edge(k, node_of[j] as usize, w, w);
+            }
+        }
+        g.add_terminal_weights(k, source, sink);
+    }
+    g.maxflow_with_progress(progress);
+    timings.cut = start.elapsed().as_secs_f64();
+    let mut out = occupied.to_vec();
+    for (k, &i) in band.iter().enumerate() {
+        if g.is_source_side(k) {
+            out[i] = false;
+        }
+    }
+    out
+}
+
+/// C(x): the mean of the best pairs' patch correlations around x's projections in the
+/// cameras that see x's nearest hull surface point; -1 without a usable pair.
+fn photo_consistency(
+    grid: &GridSpec,
+    sdf: &[f32],
+    cams: &[Camera],
+    images: &[GreyImage],
+    depth: &[Vec<f32>],
+    p: &GraphcutParams,
+    x: &Vector3<f64>,
+) -> f64 {
+    let h = grid.voxel;
+    // Unit outward normal from the signed distance's gradient (central differences).
+    let d = |o: Vector3<f64>| grid.interpolate(sdf, &(x + o), f32::MAX) as f64;
+    let grad = Vector3::new(
+        d(Vector3::x() * h) - d(-Vector3::x() * h),
+        d(Vector3::y() * h) - d(-Vector3::y() * h),
+        d(Vector3::z() * h) - d(-Vector3::z() * h),
+    );
+    if !(grad.norm() > 1e-12) || grad.iter().any(|v| v.abs() > 1e6) {
+        return -1.0;
+    }
+    let n = grad.normalize();
+    let surface = x - d(Vector3::zeros()) * n;
+    let half = (p.window / 2) as f64;
+    let mut patches: Vec<(Vector3<f64>, Vec<f32>)> = Vec::new();
+    for (c, cam) in cams.iter().enumerate() {
+        let centre = cam.centre();
+        if n.dot(&(centre - surface)) <= 0.0 {
+            continue;
+        }
+        let (sp, z) = cam.project_with_depth(&surface);
+        if z <= 0.0 || !cam.in_image(&sp) {
+            continue;
+        }
+        let (u, v) = (sp.x.round() as usize, sp.y.round() as usize);
+        if (z as f32) > depth[c][v * cam.width as usize + u] + 1.5 * h as f32 {
+            continue; // the hull hides the point from this camera
+        }
+        let Some(xp) = cam.project(x) else { continue };
+        let mut patch = Vec::with_capacity(p.window * p.window);
+        'fill: for j in 0..p.window {
+            for i in 0..p.window {
+                match images[c].sample(xp.x - half + i as f64, xp.y - half + j as f64) {
+                    Some(v) => patch.push(v),
+                    None => break 'fill,
+                }
+            }
+        }
+        if patch.len() == p.window * p.window {
+            patches.push(((centre - x).normalize(), patch));
+        }
+    }
+    let cos_max = p.max_pair_angle_deg.to_radians().cos();
+    let mut scores: Vec<f64> = Vec::new();
+    for a in 0..patches.len() {
+        for b in a + 1..patches.len() {
+            if patches[a].0.dot(&patches[b].0) >= cos_max {
+                scores.push(zncc(&patches[a].1, &patches[b].1));
+            }
+        }
+    }
+    if scores.is_empty() {
+        return -1.0;
+    }
+    scores.sort_by(|a, b| b.total_cmp(a));
+    let k = p.best_pairs.min(scores.len());
+    scores[..k].iter().sum::<f64>() / k as f64
+}
+
+/// Grey images of a frame.
+pub fn grey(images: &[image::RgbImage]) -> Vec<GreyImage> {
+    images.par_iter().map(GreyImage::from_rgb).collect()
+}
+
+/// Meshes a refined occupancy as the hull stage does.
+pub fn mesh(grid: &GridSpec, occupied: &[bool], smoothing: usize) -> (Vec<f32>, TriMesh) {
+    let sdf = crate::stages::visual_hull::box_blur_3d(
+        grid,
+        &crate::geometry::distance::signed_distance(grid, occupied),
+    );
+    let mut m = crate::stages::visual_hull::mesh_sdf(grid, &sdf);
+    crate::geometry::smooth::taubin(&mut m, smoothing);
+    (sdf, m)
+}
