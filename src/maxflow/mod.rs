@@ -240,7 +240,7 @@ impl Graph {
                 current = i;
                 self.augment(middle as usize, &mut orphans);
                 augmentations += 1;
-                if augmentations % 65_536 == 0 {
+                if augmentations.is_multiple_of(65_536) {
                     progress(self.flow, augmentations);
                 }
                 while let Some(o) = orphans.pop_front() {

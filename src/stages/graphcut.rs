@@ -2,15 +2,21 @@
 //! Vogiatzis, Torr and Cipolla, CVPR 2005).
 //!
 //! - **Band**: the hull voxels within `band` metres of the hull surface (from the hull's
-//!   signed distance). They are the graph's nodes; every other voxel keeps its hull label.
+//!   signed distance) and within the outer half of the local thickness (the largest depth
+//!   within `band`), so thin parts keep a fixed core. They are the graph's nodes; every other
+//!   voxel keeps its hull label.
 //! - **Visibility** of a band voxel x: the cameras that see the nearest hull surface point
 //!   p = x - sdf(x) * n (n the unit gradient of the signed distance): p faces the camera
 //!   (n . (c - p) > 0) and the camera's depth map of the hull mesh (splatted vertices) is not
 //!   closer than p by more than 1.5 voxels.
-//! - **Photo-consistency** C(x) in [-1, 1]: normalized cross-correlation of `window` x
-//!   `window` pixel patches (bilinear, grey) around x's projections, over pairs of visible
-//!   cameras whose viewing directions differ by at most `max_pair_angle_deg`; C is the mean
-//!   of the best `best_pairs` pairs. Without such a pair, C = -1 (flat cost).
+//! - **Photo-consistency** C(x) in [-1, 1]: zero-mean normalized cross-correlation of
+//!   patches of `window` x `window` points spaced `patch_spacing` metres on the plane through x
+//!   parallel to the hull's tangent plane, projected into each visible camera (affinely, from
+//!   the projections of the patch centre and two tangent steps) and sampled bilinearly in
+//!   grey; over pairs of visible cameras whose viewing directions differ by at most
+//!   `max_pair_angle_deg`, C is the mean of the best `best_pairs` pairs. Patches sampled on
+//!   the surface correspond across wide baselines and have the same metric size at every
+//!   image resolution. Without such a pair, C = -1 (flat cost).
 //! - **Cost** rho(x) = 1 - exp(-tan^2(pi/4 (C(x) - 1)) / sigma^2): 0 where the images agree
 //!   perfectly, 1 where they disagree or nothing sees x.
 //! - **Graph**: 6-neighbour edges of weight (4 pi / 3) h^2 (rho_i + rho_j) / 2 (h the voxel
@@ -37,8 +43,10 @@ use serde::{Deserialize, Serialize};
 pub struct GraphcutParams {
     /// Band thickness inside the hull surface, metres. Default 0.05.
     pub band: f64,
-    /// Patch edge, pixels (odd). Default 7.
+    /// Patch edge, samples (odd). Default 7.
     pub window: usize,
+    /// Distance between patch samples on the tangent plane, metres. Default 0.005.
+    pub patch_spacing: f64,
     /// Largest angle between two cameras' viewing directions for their patches to be
     /// compared, degrees. Default 50.
     pub max_pair_angle_deg: f64,
@@ -46,7 +54,7 @@ pub struct GraphcutParams {
     pub best_pairs: usize,
     /// Sharpness sigma of the cost mapping. Default 0.5.
     pub sigma: f64,
-    /// Ballooning weight lambda, per metre (times h^3 per voxel). Default 150.
+    /// Ballooning weight lambda, per metre (times h^3 per voxel). Default 200.
     pub ballooning: f64,
     /// Taubin smoothing iterations of the mesh. Default 10.
     pub smoothing_iterations: usize,
@@ -57,10 +65,11 @@ impl Default for GraphcutParams {
         GraphcutParams {
             band: 0.05,
             window: 7,
+            patch_spacing: 0.005,
             max_pair_angle_deg: 50.0,
             best_pairs: 3,
             sigma: 0.5,
-            ballooning: 150.0,
+            ballooning: 200.0,
             smoothing_iterations: 10,
         }
     }
@@ -74,13 +83,18 @@ pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
             p.band
         ));
     }
-    if p.window < 3 || p.window % 2 == 0 || p.window > 31 {
+    if p.window < 3 || p.window.is_multiple_of(2) || p.window > 31 {
         return Err(format!(
             "graphcut.window must be an odd number of pixels from 3 to 31, got {}",
             p.window
         ));
     }
-    if !(p.sigma > 0.0) || p.ballooning < 0.0 || p.best_pairs == 0 {
+    if p.sigma.is_nan()
+        || p.sigma <= 0.0
+        || p.ballooning.is_nan()
+        || p.ballooning < 0.0
+        || p.best_pairs == 0
+    {
         return Err(
             "graphcut: sigma must be positive, ballooning not negative, best_pairs at least 1"
                 .into(),
@@ -221,9 +235,18 @@ pub fn refine_timed(
 ) -> Vec<bool> {
     let start = std::time::Instant::now();
     let h = grid.voxel;
-    // Band nodes.
+    // Band nodes: hull voxels within `band` of the surface, and within the outer half of the
+    // local thickness, so that thin parts (arms, fingers) keep a fixed core and cannot be cut
+    // away whole.
+    let radius = (p.band / h).ceil() as usize;
+    let inner: Vec<f32> = sdf.iter().map(|&v| (-v).max(0.0)).collect();
+    let thickness = max_filter(grid, &inner, radius);
     let band: Vec<usize> = (0..grid.len())
-        .filter(|&i| occupied[i] && -(sdf[i] as f64) <= p.band)
+        .filter(|&i| {
+            occupied[i]
+                && (inner[i] as f64) <= p.band
+                && inner[i] <= 0.5 * thickness[i] + 0.5 * h as f32
+        })
         .collect();
     let mut node_of = vec![u32::MAX; grid.len()];
     for (k, &i) in band.iter().enumerate() {
@@ -288,6 +311,26 @@ pub fn refine_timed(
     out
 }
 
+/// Maximum of `values` over the (2r+1)^3 box around every voxel (separable).
+fn max_filter(grid: &GridSpec, values: &[f32], r: usize) -> Vec<f32> {
+    let [nx, ny, _] = grid.dims;
+    let mut cur = values.to_vec();
+    for (axis, stride) in [(0usize, 1usize), (1, nx), (2, nx * ny)] {
+        let n = grid.dims[axis];
+        let src = cur.clone();
+        cur.par_iter_mut().enumerate().for_each(|(i, v)| {
+            let c = (i / stride) % n;
+            let lo = c.saturating_sub(r);
+            let hi = (c + r).min(n - 1);
+            let base = i - c * stride;
+            *v = (lo..=hi)
+                .map(|k| src[base + k * stride])
+                .fold(f32::MIN, f32::max);
+        });
+    }
+    cur
+}
+
 /// C(x): the mean of the best pairs' patch correlations around x's projections in the
 /// cameras that see x's nearest hull surface point; -1 without a usable pair.
 fn photo_consistency(
@@ -307,12 +350,20 @@ fn photo_consistency(
         d(Vector3::y() * h) - d(-Vector3::y() * h),
         d(Vector3::z() * h) - d(-Vector3::z() * h),
     );
-    if !(grad.norm() > 1e-12) || grad.iter().any(|v| v.abs() > 1e6) {
+    if grad.norm().is_nan() || grad.norm() <= 1e-12 || grad.iter().any(|v| v.abs() > 1e6) {
         return -1.0;
     }
     let n = grad.normalize();
     let surface = x - d(Vector3::zeros()) * n;
     let half = (p.window / 2) as f64;
+    // Tangent axes of the patch plane.
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let t1 = n.cross(&helper).normalize() * p.patch_spacing;
+    let t2 = n.cross(&t1);
     let mut patches: Vec<(Vector3<f64>, Vec<f32>)> = Vec::new();
     for (c, cam) in cams.iter().enumerate() {
         let centre = cam.centre();
@@ -327,11 +378,19 @@ fn photo_consistency(
         if (z as f32) > depth[c][v * cam.width as usize + u] + 1.5 * h as f32 {
             continue; // the hull hides the point from this camera
         }
-        let Some(xp) = cam.project(x) else { continue };
+        let (Some(xp), Some(a), Some(b)) = (
+            cam.project(x),
+            cam.project(&(x + t1)),
+            cam.project(&(x + t2)),
+        ) else {
+            continue;
+        };
+        let (du, dv) = (a - xp, b - xp);
         let mut patch = Vec::with_capacity(p.window * p.window);
         'fill: for j in 0..p.window {
             for i in 0..p.window {
-                match images[c].sample(xp.x - half + i as f64, xp.y - half + j as f64) {
+                let q = xp + du * (i as f64 - half) + dv * (j as f64 - half);
+                match images[c].sample(q.x, q.y) {
                     Some(v) => patch.push(v),
                     None => break 'fill,
                 }
