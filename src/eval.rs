@@ -128,10 +128,62 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
 /// reconstruction's mesh, projected through the camera, covers (1 when the mesh explains
 /// every silhouette pixel; a conservative hull scores about 1 with a correct calibration).
 pub fn reprojection_coverage(job: &Job, stage: &str, frame: u32) -> Result<Vec<(String, f64)>> {
-    let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
-    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let (ply, _) = crate::stages::hull_files(frame);
     let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;
+    coverage_of(job, &mesh, frame)
+}
+
+/// Evaluation without ground truth (real captures), per frame and reconstruction stage in
+/// the cache: silhouette coverage per camera and the mean photo-consistency over seen
+/// vertices. Returns the printed report and the CSV.
+pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
+    use crate::stages::graphcut;
+    let mut report = String::new();
+    let mut csv =
+        String::from("frame,stage,camera,silhouette_coverage,mean_vertex_zncc,seen_vertices\n");
+    for &f in &job.frames {
+        let frames: Vec<image::RgbImage> = (0..job.sequence.cameras.len())
+            .map(|c| job.sequence.load_frame(c, f))
+            .collect::<Result<_>>()?;
+        let images = graphcut::grey(&frames);
+        for &stage in RECON_STAGES {
+            if job.cache.manifest(stage, f).is_none() {
+                continue;
+            }
+            let (ply, grid_file) = crate::stages::hull_files(f);
+            let dir = job.cache.stage_dir(stage);
+            let mesh = crate::geometry::ply::read_ply(&dir.join(ply))?;
+            let path = dir.join(grid_file);
+            let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            let (grid, _) = crate::stages::visual_hull::parse_grid(&path, &data)?;
+            let (zncc, seen) = graphcut::mean_vertex_consistency(
+                &job.sequence.cameras,
+                &images,
+                &mesh,
+                &job.config.graphcut,
+                grid.voxel,
+            );
+            let coverage = coverage_of(job, &mesh, f)?;
+            let mean_cov = coverage.iter().map(|c| c.1).sum::<f64>() / coverage.len().max(1) as f64;
+            let _ = writeln!(
+                report,
+                "frame {f:>4}  {stage:>12}: {} vertices, mean silhouette coverage {:.2}%, mean ZNCC {zncc:.3} over {seen} seen vertices",
+                mesh.vertices.len(),
+                mean_cov * 100.0
+            );
+            for (cam, c) in &coverage {
+                let _ = writeln!(report, "      {cam:>16}  {:>7.2}%", c * 100.0);
+                let _ = writeln!(csv, "{f},{stage},{cam},{c:.6},{zncc:.6},{seen}");
+            }
+        }
+    }
+    Ok((report, csv))
+}
+
+/// Silhouette coverage per camera of `mesh` reprojected (see [`reprojection_coverage`]).
+fn coverage_of(job: &Job, mesh: &TriMesh, frame: u32) -> Result<Vec<(String, f64)>> {
+    let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
+    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     Ok(job
         .sequence
         .cameras

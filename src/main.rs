@@ -200,15 +200,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .iter()
                 .any(|&f| job.sequence.ground_truth_mesh_path(f).exists())
             {
-                // No ground truth (real captures): how well the hull explains the silhouettes.
-                let mut csv = String::from("frame,stage,camera,silhouette_coverage\n");
-                println!("no ground truth: silhouette coverage of the reprojected visual hull per camera");
-                for &f in &job.frames {
-                    for (cam, c) in hullpose::eval::reprojection_coverage(&job, "visual_hull", f)? {
-                        println!("frame {f:>4}  {cam:>14}  {:>7.2}%", c * 100.0);
-                        csv.push_str(&format!("{f},visual_hull,{cam},{c:.6}\n"));
-                    }
-                }
+                // No ground truth (real captures): how well the reconstructions explain the
+                // silhouettes and the images.
+                let (report, csv) = hullpose::eval::without_ground_truth(&job)?;
+                println!("no ground truth: silhouette coverage and photo-consistency of the reconstructions");
+                print!("{report}");
                 let path = job.config.output.join("evaluation").join("coverage.csv");
                 hullpose::fsutil::write_atomic(&path, csv.as_bytes())?;
                 println!("written to {}", path.display());

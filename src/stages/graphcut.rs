@@ -10,7 +10,7 @@
 //!   (n . (c - p) > 0) and the camera's depth map of the hull mesh (splatted vertices) is not
 //!   closer than p by more than 1.5 voxels.
 //! - **Photo-consistency** C(x) in [-1, 1]: zero-mean normalized cross-correlation of
-//!   patches of `window` x `window` points spaced `patch_spacing` metres on the plane through x
+//!   patches of `window` x `window` points spaced `patch_spacing` voxels on the plane through x
 //!   parallel to the hull's tangent plane, projected into each visible camera (affinely, from
 //!   the projections of the patch centre and two tangent steps) and sampled bilinearly in
 //!   grey; over pairs of visible cameras whose viewing directions differ by at most
@@ -45,7 +45,7 @@ pub struct GraphcutParams {
     pub band: f64,
     /// Patch edge, samples (odd). Default 7.
     pub window: usize,
-    /// Distance between patch samples on the tangent plane, metres. Default 0.005.
+    /// Distance between patch samples on the tangent plane, voxels. Default 0.5.
     pub patch_spacing: f64,
     /// Largest angle between two cameras' viewing directions for their patches to be
     /// compared, degrees. Default 50.
@@ -65,7 +65,7 @@ impl Default for GraphcutParams {
         GraphcutParams {
             band: 0.05,
             window: 7,
-            patch_spacing: 0.005,
+            patch_spacing: 0.5,
             max_pair_angle_deg: 50.0,
             best_pairs: 3,
             sigma: 0.5,
@@ -355,6 +355,22 @@ fn photo_consistency(
     }
     let n = grad.normalize();
     let surface = x - d(Vector3::zeros()) * n;
+    patch_consistency(cams, images, depth, p, h, x, &n, &surface)
+}
+
+/// C at point `x` with patch normal `n`, seen by the cameras that see `surface` (facing and
+/// not hidden according to `depth`, within 1.5 `h`); -1 without a usable camera pair.
+#[allow(clippy::too_many_arguments)]
+pub fn patch_consistency(
+    cams: &[Camera],
+    images: &[GreyImage],
+    depth: &[Vec<f32>],
+    p: &GraphcutParams,
+    h: f64,
+    x: &Vector3<f64>,
+    n: &Vector3<f64>,
+    surface: &Vector3<f64>,
+) -> f64 {
     let half = (p.window / 2) as f64;
     // Tangent axes of the patch plane.
     let helper = if n.x.abs() < 0.9 {
@@ -362,7 +378,7 @@ fn photo_consistency(
     } else {
         Vector3::y()
     };
-    let t1 = n.cross(&helper).normalize() * p.patch_spacing;
+    let t1 = n.cross(&helper).normalize() * (p.patch_spacing * h);
     let t2 = n.cross(&t1);
     let mut patches: Vec<(Vector3<f64>, Vec<f32>)> = Vec::new();
     for (c, cam) in cams.iter().enumerate() {
@@ -370,7 +386,7 @@ fn photo_consistency(
         if n.dot(&(centre - surface)) <= 0.0 {
             continue;
         }
-        let (sp, z) = cam.project_with_depth(&surface);
+        let (sp, z) = cam.project_with_depth(surface);
         if z <= 0.0 || !cam.in_image(&sp) {
             continue;
         }
@@ -431,4 +447,29 @@ pub fn mesh(grid: &GridSpec, occupied: &[bool], smoothing: usize) -> (Vec<f32>, 
     let mut m = crate::stages::visual_hull::mesh_sdf(grid, &sdf);
     crate::geometry::smooth::taubin(&mut m, smoothing);
     (sdf, m)
+}
+
+/// Mean photo-consistency C over a mesh's vertices seen by a usable camera pair (patches on
+/// the vertex's tangent plane, spaced as the stage's, `h` the voxel size), and how many
+/// vertices that is. Visibility from the mesh's own depth maps.
+pub fn mean_vertex_consistency(
+    cams: &[Camera],
+    images: &[GreyImage],
+    mesh: &TriMesh,
+    p: &GraphcutParams,
+    h: f64,
+) -> (f64, usize) {
+    let depth = depth_maps(cams, mesh, h);
+    let normals = mesh.vertex_normals();
+    let scores: Vec<f64> = mesh
+        .vertices
+        .par_iter()
+        .zip(normals.par_iter())
+        .map(|(v, n)| patch_consistency(cams, images, &depth, p, h, v, n, v))
+        .filter(|&c| c > -1.0)
+        .collect();
+    (
+        scores.iter().sum::<f64>() / scores.len().max(1) as f64,
+        scores.len(),
+    )
 }

@@ -84,7 +84,7 @@ pub const STAGES: &[StageDef] = &[
         name: "graphcut",
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["visual_hull"],
-        format_version: 3,
+        format_version: 4,
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: graphcut_compute,
