@@ -99,6 +99,9 @@ enum Command {
         /// The camera name (default: the first camera).
         #[arg(long)]
         camera: Option<String>,
+        /// Which reconstruction: visual_hull or graphcut.
+        #[arg(long, default_value = "visual_hull")]
+        stage: String,
         /// Output PNG.
         #[arg(long)]
         out: PathBuf,
@@ -249,10 +252,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             file,
             frame,
             camera,
+            stage,
             out,
         } => {
             let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
-            let img = hullpose::overlay::hull_beside_frame(&job, frame, camera.as_deref())?;
+            let img = hullpose::overlay::hull_beside_frame(&job, &stage, frame, camera.as_deref())?;
             hullpose::imageio::write_rgb(&out, &img)?;
             println!("wrote {}", out.display());
         }

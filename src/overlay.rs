@@ -66,9 +66,12 @@ pub fn mesh_beside_frame(
     out
 }
 
-/// [`mesh_beside_frame`] for a job's cached visual hull of `frame`, through the camera
-/// named `camera` (the first camera when `None`).
-pub fn hull_beside_frame(job: &Job, frame: u32, camera: Option<&str>) -> Result<RgbImage> {
+/// [`mesh_beside_frame`] for a job's cached reconstruction (`stage`: visual_hull or graphcut)
+/// of `frame`, through the camera named `camera` (the first camera when `None`).
+pub fn hull_beside_frame(job: &Job, stage: &str, frame: u32, camera: Option<&str>) -> Result<RgbImage> {
+    if !["visual_hull", "graphcut"].contains(&stage) {
+        return Err(Error::Usage(format!("--stage must be visual_hull or graphcut, not '{stage}'")));
+    }
     let seq = &job.sequence;
     let c = match camera {
         None => 0,
@@ -86,7 +89,7 @@ pub fn hull_beside_frame(job: &Job, frame: u32, camera: Option<&str>) -> Result<
     let ctx = crate::stages::Context::new(&job.config, seq, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let (ply, _) = crate::stages::hull_files(frame);
-    let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir("visual_hull").join(ply))?;
+    let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;
     Ok(mesh_beside_frame(
         &seq.cameras[c],
         &seq.load_frame(c, frame)?,
