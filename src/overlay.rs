@@ -68,9 +68,16 @@ pub fn mesh_beside_frame(
 
 /// [`mesh_beside_frame`] for a job's cached reconstruction (`stage`: visual_hull or graphcut)
 /// of `frame`, through the camera named `camera` (the first camera when `None`).
-pub fn hull_beside_frame(job: &Job, stage: &str, frame: u32, camera: Option<&str>) -> Result<RgbImage> {
+pub fn hull_beside_frame(
+    job: &Job,
+    stage: &str,
+    frame: u32,
+    camera: Option<&str>,
+) -> Result<RgbImage> {
     if !["visual_hull", "graphcut"].contains(&stage) {
-        return Err(Error::Usage(format!("--stage must be visual_hull or graphcut, not '{stage}'")));
+        return Err(Error::Usage(format!(
+            "--stage must be visual_hull or graphcut, not '{stage}'"
+        )));
     }
     let seq = &job.sequence;
     let c = match camera {

@@ -135,3 +135,16 @@ fn random_graphs_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
         assert_eq!(cut, flow, "trial {trial}: cut capacity");
     }
 }
+
+#[test]
+fn zero_capacities_give_zero_flow_and_every_node_on_the_sink_side() {
+    let mut g = Graph::new(5);
+    for i in 0..4 {
+        g.add_edge(i, i + 1, 0.0, 0.0);
+    }
+    g.add_terminal_weights(0, 0.0, 0.0);
+    assert_eq!(g.maxflow(), 0.0);
+    assert!((0..5).all(|i| !g.is_source_side(i)));
+    let mut empty = Graph::new(0);
+    assert_eq!(empty.maxflow(), 0.0);
+}
