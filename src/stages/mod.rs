@@ -289,6 +289,14 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         .map(|c| ctx.sequence.load_frame(c, frame))
         .collect::<Result<_>>()?;
     let images = graphcut::grey(&frames);
+    // Long cuts report their progress (drawn only when stderr is a terminal).
+    let spinner = indicatif::ProgressBar::new_spinner();
+    let mut report = |flow: f64, augmentations: u64| {
+        spinner.set_message(format!(
+            "frame {frame}: max-flow {flow:.3e} after {augmentations} augmentations"
+        ));
+        spinner.tick();
+    };
     let refined = graphcut::refine(
         &grid,
         &occupied,
@@ -297,8 +305,9 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         &images,
         &depth,
         p,
-        &mut |_, _| {},
+        &mut report,
     );
+    spinner.finish_and_clear();
     let (refined_sdf, mesh) = graphcut::mesh(&grid, &refined, p.smoothing_iterations);
     let normals = mesh.vertex_normals();
     let attrs = VertexAttributes {
