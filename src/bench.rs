@@ -141,6 +141,7 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
     let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
     let mut timings = gc::Timings::default();
     let t = Instant::now();
+    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let refined = gc::refine_timed(
         &grid,
         &occupied,
@@ -148,6 +149,7 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         cams,
         &images,
         &depth,
+        &masks,
         p,
         &mut |_, _| {},
         &mut timings,

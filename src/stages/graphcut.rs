@@ -25,6 +25,9 @@
 //!   source (outside) with that face's weight, next to a deeper hull voxel to the sink
 //!   (inside); every band voxel gets a ballooning link lambda h^3 to the sink, rewarding
 //!   enclosed volume so the minimal surface does not shrink.
+//! - **Rims**: an outer band voxel whose centre projects onto a silhouette's outline lies
+//!   where the hull touches the object; with `pin_rims` it is tied to the sink (kept), so the
+//!   refined surface still explains the silhouettes.
 //! - **Cut**: Boykov-Kolmogorov max-flow; source-side band voxels are carved. Where no camera
 //!   pair sees the surface, rho is flat and the ballooning keeps the hull's shape (the
 //!   phantom volume stays, for stage 4 to flag).
@@ -58,6 +61,11 @@ pub struct GraphcutParams {
     pub ballooning: f64,
     /// Taubin smoothing iterations of the mesh. Default 10.
     pub smoothing_iterations: usize,
+    /// Keep the hull's rim voxels (outer band voxels whose centre projects onto a silhouette's
+    /// outline, where the hull touches the object) inside. Default false: with many cameras
+    /// the rims cover much of the surface and little is refined (tripod t0: accuracy 1.63 cm
+    /// with, 1.31 cm without); on real captures it keeps the silhouettes explained.
+    pub pin_rims: bool,
 }
 
 impl Default for GraphcutParams {
@@ -71,6 +79,7 @@ impl Default for GraphcutParams {
             sigma: 0.5,
             ballooning: 200.0,
             smoothing_iterations: 10,
+            pin_rims: false,
         }
     }
 }
@@ -196,6 +205,7 @@ pub fn refine(
     cams: &[Camera],
     images: &[GreyImage],
     depth: &[Vec<f32>],
+    silhouettes: &[image::GrayImage],
     p: &GraphcutParams,
     progress: &mut dyn FnMut(f64, u64),
 ) -> Vec<bool> {
@@ -206,6 +216,7 @@ pub fn refine(
         cams,
         images,
         depth,
+        silhouettes,
         p,
         progress,
         &mut Timings::default(),
@@ -229,10 +240,12 @@ pub fn refine_timed(
     cams: &[Camera],
     images: &[GreyImage],
     depth: &[Vec<f32>],
+    silhouettes: &[image::GrayImage],
     p: &GraphcutParams,
     progress: &mut dyn FnMut(f64, u64),
     timings: &mut Timings,
 ) -> Vec<bool> {
+    let outlines: Vec<Vec<bool>> = silhouettes.par_iter().map(outline).collect();
     let start = std::time::Instant::now();
     let h = grid.voxel;
     // Band nodes: hull voxels within `band` of the surface, and within the outer half of the
@@ -298,6 +311,9 @@ pub fn refine_timed(
                 g.add_edge(k, node_of[j] as usize, w, w);
             }
         }
+        if p.pin_rims && source > 0.0 && on_rim(cams, &outlines, &grid.centre(x, y, z)) {
+            sink += 1e12; // the hull touches the object here: keep it
+        }
         g.add_terminal_weights(k, source, sink);
     }
     g.maxflow_with_progress(progress);
@@ -309,6 +325,44 @@ pub fn refine_timed(
         }
     }
     out
+}
+
+/// Silhouette outline, one pixel wide on each side: pixels whose 3x3 neighbourhood holds both
+/// silhouette and background.
+fn outline(mask: &image::GrayImage) -> Vec<bool> {
+    let (w, h) = (mask.width() as i64, mask.height() as i64);
+    let fg = |x: i64, y: i64| {
+        x >= 0 && y >= 0 && x < w && y < h && mask.as_raw()[(y * w + x) as usize] >= 128
+    };
+    let mut out = vec![false; (w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let (mut any_fg, mut any_bg) = (false, false);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if fg(x + dx, y + dy) {
+                        any_fg = true;
+                    } else {
+                        any_bg = true;
+                    }
+                }
+            }
+            out[(y * w + x) as usize] = any_fg && any_bg;
+        }
+    }
+    out
+}
+
+/// Whether `x` projects onto some camera's silhouette outline.
+fn on_rim(cams: &[Camera], outlines: &[Vec<bool>], x: &Vector3<f64>) -> bool {
+    cams.iter()
+        .zip(outlines)
+        .any(|(cam, o)| match cam.project(x) {
+            Some(px) if cam.in_image(&px) => {
+                o[px.y.round() as usize * cam.width as usize + px.x.round() as usize]
+            }
+            _ => false,
+        })
 }
 
 /// Maximum of `values` over the (2r+1)^3 box around every voxel (separable).

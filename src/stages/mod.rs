@@ -84,7 +84,7 @@ pub const STAGES: &[StageDef] = &[
         name: "graphcut",
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["visual_hull"],
-        format_version: 4,
+        format_version: 6,
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: graphcut_compute,
@@ -297,6 +297,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         ));
         spinner.tick();
     };
+    let masks = load_silhouettes(ctx, frame)?;
     let refined = graphcut::refine(
         &grid,
         &occupied,
@@ -304,6 +305,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         cams,
         &images,
         &depth,
+        &masks,
         p,
         &mut report,
     );
