@@ -92,9 +92,18 @@ fn temple_ring_loads_and_projects_onto_the_object() {
     );
 }
 
-/// Runs an example pipeline (examples/middlebury-SET.yaml) on the real capture in a temporary
-/// cache and returns the per-camera silhouette coverage of the reprojected hull.
-fn example_coverage(set: &str) -> Option<Vec<(String, f64)>> {
+/// One row of the evaluation without ground truth: stage, camera, silhouette coverage, and
+/// the stage's mean ZNCC over seen vertices.
+struct Row {
+    stage: String,
+    camera: String,
+    coverage: f64,
+    zncc: f64,
+}
+
+/// Runs an example pipeline (examples/middlebury-SET.yaml: silhouettes, hull, graph cut) on
+/// the real capture in a temporary cache and returns its evaluation rows.
+fn example_coverage(set: &str) -> Option<Vec<Row>> {
     let shared = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared");
     if !shared.join("realdata").exists() {
         eprintln!("skipped: {} is not present", shared.display());
@@ -144,7 +153,12 @@ fn example_coverage(set: &str) -> Option<Vec<(String, f64)>> {
             .skip(1)
             .map(|l| {
                 let f: Vec<&str> = l.split(',').collect();
-                (f[2].to_string(), f[3].parse().unwrap())
+                Row {
+                    stage: f[1].to_string(),
+                    camera: f[2].to_string(),
+                    coverage: f[3].parse().unwrap(),
+                    zncc: f[4].parse().unwrap(),
+                }
             })
             .collect(),
     )
@@ -165,7 +179,11 @@ fn dino_hull_reprojects_onto_the_silhouettes_of_the_good_views() {
         .collect();
     assert_eq!(good.len(), 15);
     for name in good {
-        let c = coverage.iter().find(|(n, _)| n == name).unwrap().1;
+        let c = coverage
+            .iter()
+            .find(|r| r.camera == name && r.stage == "visual_hull")
+            .unwrap()
+            .coverage;
         assert!(
             c >= 0.90,
             "{name}: the hull covers {:.1}% of the silhouette",
@@ -175,11 +193,25 @@ fn dino_hull_reprojects_onto_the_silhouettes_of_the_good_views() {
 }
 
 #[test]
-fn temple_hull_runs_from_its_example() {
-    let Some(coverage) = example_coverage("temple") else {
+fn temple_hull_and_refinement_run_from_the_example() {
+    let Some(rows) = example_coverage("temple") else {
         return;
     };
-    assert_eq!(coverage.len(), 16);
-    let mean = coverage.iter().map(|c| c.1).sum::<f64>() / 16.0;
-    assert!(mean >= 0.95, "mean coverage {mean:.3}");
+    let of = |stage: &str| rows.iter().filter(|r| r.stage == stage).collect::<Vec<_>>();
+    let (hull, cut) = (of("visual_hull"), of("graphcut"));
+    assert_eq!((hull.len(), cut.len()), (16, 16));
+    let mean = |rs: &[&Row]| rs.iter().map(|r| r.coverage).sum::<f64>() / rs.len() as f64;
+    assert!(mean(&hull) >= 0.95, "hull mean coverage {:.3}", mean(&hull));
+    assert!(
+        mean(&cut) >= 0.95,
+        "refined mean coverage {:.3}",
+        mean(&cut)
+    );
+    // The refinement moves the surface to where the images agree better.
+    assert!(
+        cut[0].zncc > hull[0].zncc,
+        "mean ZNCC {} vs the hull's {}",
+        cut[0].zncc,
+        hull[0].zncc
+    );
 }
