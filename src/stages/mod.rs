@@ -181,14 +181,12 @@ pub fn hull_files(frame: u32) -> (String, String) {
 }
 
 fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
-    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let masks = load_silhouettes(ctx, frame)?;
     let p = &ctx.config.visual_hull;
     let hull = visual_hull::reconstruct(&ctx.sequence.cameras, &masks, p).map_err(|m| {
         Error::invalid(&ctx.config.path, format!("visual_hull, frame {frame}: {m}"))
     })?;
     let dir = ctx.cache.stage_dir("visual_hull");
-    let (ply, grid) = hull_files(frame);
     let mut warnings = Vec::new();
     let (mesh, grid_data) = match &hull {
         Some(h) => (h.mesh.clone(), visual_hull::grid_bytes(&h.grid, &h.sdf)),
@@ -209,18 +207,27 @@ fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
             )
         }
     };
+    write_reconstruction(&dir, frame, &mesh, &grid_data, warnings)
+}
+
+/// Writes a reconstruction stage's artifacts of a frame: the mesh (binary PLY with normals)
+/// and the serialized grid.
+fn write_reconstruction(
+    dir: &std::path::Path,
+    frame: u32,
+    mesh: &TriMesh,
+    grid_data: &[u8],
+    warnings: Vec<String>,
+) -> Result<Output> {
+    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
+    let (ply, grid) = hull_files(frame);
     let normals = mesh.vertex_normals();
     let attrs = VertexAttributes {
         normals: Some(&normals),
         ..Default::default()
     };
-    write_ply(
-        &dir.join(&ply),
-        &mesh,
-        &attrs,
-        PlyFormat::BinaryLittleEndian,
-    )?;
-    crate::fsutil::write_atomic(&dir.join(&grid), &grid_data)?;
+    write_ply(&dir.join(&ply), mesh, &attrs, PlyFormat::BinaryLittleEndian)?;
+    crate::fsutil::write_atomic(&dir.join(&grid), grid_data)?;
     Ok(Output {
         files: vec![ply, grid],
         warnings,
@@ -261,25 +268,16 @@ pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Ve
 }
 
 fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
-    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let p = &ctx.config.graphcut;
     let (grid, sdf) = load_grid(ctx, "visual_hull", frame)?;
-    let (ply, grid_file) = hull_files(frame);
+    let (ply, _) = hull_files(frame);
     let dir = ctx.cache.stage_dir("graphcut");
     let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
     if !occupied.iter().any(|&o| o) {
         // An empty hull stays empty.
-        write_ply(
-            &dir.join(&ply),
-            &TriMesh::default(),
-            &VertexAttributes::default(),
-            PlyFormat::BinaryLittleEndian,
-        )?;
-        crate::fsutil::write_atomic(&dir.join(&grid_file), &visual_hull::grid_bytes(&grid, &sdf))?;
-        return Ok(Output {
-            files: vec![ply, grid_file],
-            warnings: vec![format!("frame {frame}: the hull is empty")],
-        });
+        let warning = format!("frame {frame}: the hull is empty");
+        let grid_data = visual_hull::grid_bytes(&grid, &sdf);
+        return write_reconstruction(&dir, frame, &TriMesh::default(), &grid_data, vec![warning]);
     }
     let hull = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
     let cams = &ctx.sequence.cameras;
@@ -311,23 +309,11 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
     );
     spinner.finish_and_clear();
     let (refined_sdf, mesh) = graphcut::mesh(&grid, &refined, p.smoothing_iterations);
-    let normals = mesh.vertex_normals();
-    let attrs = VertexAttributes {
-        normals: Some(&normals),
-        ..Default::default()
-    };
-    write_ply(
-        &dir.join(&ply),
+    write_reconstruction(
+        &dir,
+        frame,
         &mesh,
-        &attrs,
-        PlyFormat::BinaryLittleEndian,
-    )?;
-    crate::fsutil::write_atomic(
-        &dir.join(&grid_file),
         &visual_hull::grid_bytes(&grid, &refined_sdf),
-    )?;
-    Ok(Output {
-        files: vec![ply, grid_file],
-        warnings: Vec::new(),
-    })
+        Vec::new(),
+    )
 }
