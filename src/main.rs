@@ -59,6 +59,9 @@ enum Command {
         /// Re-run this stage and every stage downstream of it.
         #[arg(long, value_name = "STAGE")]
         from: Option<String>,
+        /// Run the stages up to this one only (e.g. the per-frame stages of a shard).
+        #[arg(long, value_name = "STAGE")]
+        until: Option<String>,
         /// Frames to process, A..B inclusive (overrides pipeline.yaml).
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
@@ -157,6 +160,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             file,
             only,
             from,
+            until,
             frames,
             force,
         } => {
@@ -168,6 +172,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let opts = RunOptions {
                 only,
                 from,
+                until,
                 frames,
                 force,
             };

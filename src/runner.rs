@@ -21,6 +21,8 @@ pub struct RunOptions {
     pub from: Option<String>,
     /// Frames to process (overrides pipeline.yaml).
     pub frames: Option<FrameRange>,
+    /// Stop after this stage (stages after it are not run).
+    pub until: Option<String>,
     /// Recompute even what the cache holds.
     pub force: bool,
 }
@@ -132,7 +134,7 @@ fn plan(opts: &RunOptions) -> Result<Vec<(&'static StageDef, bool)>> {
         let stage = stages::find(name)?;
         Ok(STAGES.iter().position(|s| s.name == stage.name).unwrap())
     };
-    Ok(match (&opts.only, &opts.from) {
+    let mut plan: Vec<(&'static StageDef, bool)> = match (&opts.only, &opts.from) {
         (Some(only), _) => {
             let p = position(only)?;
             STAGES[..=p]
@@ -150,7 +152,12 @@ fn plan(opts: &RunOptions) -> Result<Vec<(&'static StageDef, bool)>> {
                 .collect()
         }
         _ => STAGES.iter().map(|s| (s, opts.force)).collect(),
-    })
+    };
+    if let Some(until) = &opts.until {
+        let p = position(until)?;
+        plan.truncate(p + 1);
+    }
+    Ok(plan)
 }
 
 fn bar(len: usize, stage: &str) -> ProgressBar {

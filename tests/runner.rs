@@ -44,8 +44,10 @@ impl RunDir {
     fn path(&self) -> &Path {
         self.dir.path()
     }
+    /// `pipeline run pipeline.yaml --until silhouette ARGS` (these tests are about the runner
+    /// and the first stage).
     fn run(&self, args: &[&str]) -> (bool, String, String) {
-        let mut all = vec!["run", "pipeline.yaml"];
+        let mut all = vec!["run", "pipeline.yaml", "--until", "silhouette"];
         all.extend_from_slice(args);
         run_cli(&all, self.path())
     }
@@ -165,7 +167,7 @@ fn artifact_bytes(root: &Path) -> Vec<(String, Vec<u8>)> {
 fn a_run_killed_midway_leaves_a_cache_the_next_run_completes() {
     let rd = run_dir(tripod(), "tripod", "");
     let mut child = std::process::Command::new(pipeline_bin())
-        .args(["run", "pipeline.yaml"])
+        .args(["run", "pipeline.yaml", "--until", "silhouette"])
         .current_dir(rd.path())
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
