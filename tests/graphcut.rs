@@ -10,17 +10,6 @@ use hullpose::geometry::TriMesh;
 use hullpose::stages::graphcut;
 use std::path::Path;
 
-fn run_folder(made: &Made, seq: &str) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    let yaml = format!(
-        "calibration: {}\nsequence: {}\n",
-        made.root.join("calib/cameras.yaml").display(),
-        made.root.join("data").join(seq).display()
-    );
-    std::fs::write(dir.path().join("pipeline.yaml"), yaml).unwrap();
-    dir
-}
-
 /// (frame, stage, accuracy, completeness) rows of `pipeline evaluate`.
 fn evaluate(dir: &Path, frames: &str) -> Vec<(u32, String, f64, f64)> {
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--frames", frames], dir);
@@ -103,7 +92,7 @@ fn check_scene(
     concavity_frames: &[u32],
     max_ratio: f64,
 ) -> tempfile::TempDir {
-    let dir = run_folder(made, seq);
+    let dir = run_folder(made, seq, "");
     let rows = evaluate(dir.path(), frames);
     for (f, stage, acc, comp) in rows.iter().filter(|r| r.1 == "graphcut") {
         let hull = rows

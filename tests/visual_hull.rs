@@ -7,18 +7,6 @@ use common::*;
 use hullpose::geometry::TriMesh;
 use std::path::Path;
 
-/// A run folder over a shared synthetic capture (given masks as silhouettes).
-fn run_folder(made: &Made, seq: &str, extra: &str) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    let yaml = format!(
-        "calibration: {}\nsequence: {}\n{extra}",
-        made.root.join("calib/cameras.yaml").display(),
-        made.root.join("data").join(seq).display()
-    );
-    std::fs::write(dir.path().join("pipeline.yaml"), yaml).unwrap();
-    dir
-}
-
 fn completeness_rows(dir: &Path) -> Vec<(u32, f64, f64)> {
     let (ok, out, err) = run_cli(&["run", "pipeline.yaml", "--only", "visual_hull"], dir);
     assert!(ok, "{err}");

@@ -224,6 +224,19 @@ pub fn components(grid: &Grid, set: &[bool]) -> Vec<Vec<usize>> {
     out
 }
 
+/// A run folder whose pipeline.yaml points at a shared synthetic capture (given masks as
+/// silhouettes), with `extra` YAML appended; it keeps its own cache.
+pub fn run_folder(made: &Made, seq: &str, extra: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let yaml = format!(
+        "calibration: {}\nsequence: {}\n{extra}",
+        made.root.join("calib/cameras.yaml").display(),
+        made.root.join("data").join(seq).display()
+    );
+    std::fs::write(dir.path().join("pipeline.yaml"), yaml).unwrap();
+    dir
+}
+
 /// Path of the built `pipeline` binary.
 pub fn pipeline_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_pipeline"))
