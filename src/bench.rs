@@ -139,9 +139,9 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
     let (t_depth, depth) = best_of(1, || gc::depth_maps(cams, &hull, grid.voxel));
     let (t_grey, images) = best_of(1, || gc::grey(&frames));
     let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
+    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let mut timings = gc::Timings::default();
     let t = Instant::now();
-    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let refined = gc::refine_timed(
         &grid,
         &occupied,

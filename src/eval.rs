@@ -53,8 +53,16 @@ pub struct ReconRow {
 
 /// Accuracy and completeness of one reconstruction.
 pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TriMesh) -> (f64, f64) {
-    let samples = sample_surface(truth, 0.002);
-    let index = PointIndex::new(samples, 0.01);
+    score_against(recon, grid, sdf, &truth_index(truth))
+}
+
+/// The true surface sampled every 2 mm, indexed for nearest-point queries.
+fn truth_index(truth: &TriMesh) -> PointIndex {
+    PointIndex::new(sample_surface(truth, 0.002), 0.01)
+}
+
+/// [`score`] against an already sampled true surface.
+fn score_against(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], index: &PointIndex) -> (f64, f64) {
     let mut d: Vec<f64> = recon
         .vertices
         .par_iter()
@@ -89,6 +97,8 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
             continue;
         };
         any_truth = true;
+        // Sampled once per frame (when a stage is cached), scored against every stage.
+        let mut index = None;
         for &stage in RECON_STAGES {
             if job.cache.manifest(stage, frame).is_none() {
                 continue;
@@ -99,7 +109,12 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
             let path = dir.join(&grid_file);
             let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
             let (grid, sdf) = crate::stages::visual_hull::parse_grid(&path, &data)?;
-            let (accuracy90, completeness) = score(&mesh, &grid, &sdf, &truth);
+            let (accuracy90, completeness) = score_against(
+                &mesh,
+                &grid,
+                &sdf,
+                index.get_or_insert_with(|| truth_index(&truth)),
+            );
             rows.push(ReconRow {
                 frame,
                 stage,
@@ -130,7 +145,16 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
 pub fn reprojection_coverage(job: &Job, stage: &str, frame: u32) -> Result<Vec<(String, f64)>> {
     let (ply, _) = crate::stages::hull_files(frame);
     let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;
-    coverage_of(job, &mesh, frame)
+    coverage_of(job, &pixel_tables(job), &mesh, frame)
+}
+
+/// Per-camera pixel tables (one undistortion per pixel: made once per evaluation).
+fn pixel_tables(job: &Job) -> Vec<crate::synth::raster::PixelRays> {
+    job.sequence
+        .cameras
+        .par_iter()
+        .map(crate::synth::raster::PixelRays::new)
+        .collect()
 }
 
 /// Evaluation without ground truth (real captures), per frame and reconstruction stage in
@@ -141,6 +165,7 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
     let mut report = String::new();
     let mut csv =
         String::from("frame,stage,camera,silhouette_coverage,mean_vertex_zncc,seen_vertices\n");
+    let rays = pixel_tables(job);
     for &f in &job.frames {
         let frames: Vec<image::RgbImage> = (0..job.sequence.cameras.len())
             .map(|c| job.sequence.load_frame(c, f))
@@ -163,7 +188,7 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
                 &job.config.graphcut,
                 grid.voxel,
             );
-            let coverage = coverage_of(job, &mesh, f)?;
+            let coverage = coverage_of(job, &rays, &mesh, f)?;
             let mean_cov = coverage.iter().map(|c| c.1).sum::<f64>() / coverage.len().max(1) as f64;
             let _ = writeln!(
                 report,
@@ -181,18 +206,21 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
 }
 
 /// Silhouette coverage per camera of `mesh` reprojected (see [`reprojection_coverage`]).
-fn coverage_of(job: &Job, mesh: &TriMesh, frame: u32) -> Result<Vec<(String, f64)>> {
+fn coverage_of(
+    job: &Job,
+    rays: &[crate::synth::raster::PixelRays],
+    mesh: &TriMesh,
+    frame: u32,
+) -> Result<Vec<(String, f64)>> {
     let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     Ok(job
         .sequence
         .cameras
         .par_iter()
-        .zip(masks.par_iter())
-        .map(|(cam, mask)| {
-            let rays = crate::synth::raster::PixelRays::new(cam);
-            let frags =
-                crate::synth::raster::rasterize(cam, &rays, &mesh.vertices, &mesh.triangles);
+        .zip(masks.par_iter().zip(rays.par_iter()))
+        .map(|(cam, (mask, rays))| {
+            let frags = crate::synth::raster::rasterize(cam, rays, &mesh.vertices, &mesh.triangles);
             let (mut sil, mut covered) = (0usize, 0usize);
             for (m, f) in mask.as_raw().iter().zip(&frags) {
                 if *m >= 128 {

@@ -17,19 +17,7 @@ fn evaluate(dir: &Path, frames: &str) -> Vec<(u32, String, f64, f64)> {
     let (ok, out, err) = run_cli(&["evaluate", "pipeline.yaml", "--frames", frames], dir);
     assert!(ok, "{err}");
     eprintln!("{out}");
-    let csv = std::fs::read_to_string(dir.join("output/evaluation/reconstruction.csv")).unwrap();
-    csv.lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (
-                f[0].parse().unwrap(),
-                f[1].to_string(),
-                f[3].parse().unwrap(),
-                f[4].parse().unwrap(),
-            )
-        })
-        .collect()
+    reconstruction_rows(dir)
 }
 
 fn mesh(dir: &Path, stage: &str, frame: u32) -> TriMesh {

@@ -14,17 +14,10 @@ fn completeness_rows(dir: &Path) -> Vec<(u32, f64, f64)> {
     let (ok, out, err) = run_cli(&["evaluate", "pipeline.yaml"], dir);
     assert!(ok, "{err}");
     eprintln!("{out}");
-    let csv = std::fs::read_to_string(dir.join("output/evaluation/reconstruction.csv")).unwrap();
-    csv.lines()
-        .skip(1)
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            (
-                f[0].parse().unwrap(),
-                f[3].parse().unwrap(),
-                f[4].parse().unwrap(),
-            )
-        })
+    reconstruction_rows(dir)
+        .into_iter()
+        .filter(|r| r.1 == "visual_hull")
+        .map(|r| (r.0, r.2, r.3))
         .collect()
 }
 

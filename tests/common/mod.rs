@@ -237,6 +237,24 @@ pub fn run_folder(made: &Made, seq: &str, extra: &str) -> tempfile::TempDir {
     dir
 }
 
+/// Rows (frame, stage, accuracy90, completeness) of `output/evaluation/reconstruction.csv`
+/// in a run folder.
+pub fn reconstruction_rows(dir: &Path) -> Vec<(u32, String, f64, f64)> {
+    let csv = std::fs::read_to_string(dir.join("output/evaluation/reconstruction.csv")).unwrap();
+    csv.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (
+                f[0].parse().unwrap(),
+                f[1].to_string(),
+                f[3].parse().unwrap(),
+                f[4].parse().unwrap(),
+            )
+        })
+        .collect()
+}
+
 /// Path of the built `pipeline` binary.
 pub fn pipeline_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_pipeline"))
