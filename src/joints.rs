@@ -20,13 +20,31 @@ pub struct JointRow {
 
 /// Parses joints.csv text; `path` names the file in errors.
 pub fn parse(path: &Path, text: &str) -> Result<Vec<JointRow>> {
+    Ok(parse_frame_bone_rows(path, text, HEADER)?
+        .into_iter()
+        .map(|(frame, bone, v)| JointRow {
+            frame,
+            bone,
+            head: Vector3::new(v[0], v[1], v[2]),
+            tail: Vector3::new(v[3], v[4], v[5]),
+        })
+        .collect())
+}
+
+/// Parses a CSV of `frame,bone` and six finite numbers per row under `header` (the schema
+/// of joints.csv and poses.csv).
+pub fn parse_frame_bone_rows(
+    path: &Path,
+    text: &str,
+    header: &str,
+) -> Result<Vec<(u32, String, [f64; 6])>> {
     let mut lines = text.lines().enumerate();
     match lines.next() {
-        Some((_, h)) if h.trim() == HEADER => {}
+        Some((_, h)) if h.trim() == header => {}
         _ => {
             return Err(Error::invalid(
                 path,
-                format!("the first line must be the header '{HEADER}'"),
+                format!("the first line must be the header '{header}'"),
             ))
         }
     }
@@ -51,12 +69,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Vec<JointRow>> {
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| bad(&format!("field {} is not a finite number", k + 3)))?;
         }
-        rows.push(JointRow {
-            frame,
-            bone: f[1].to_string(),
-            head: Vector3::new(v[0], v[1], v[2]),
-            tail: Vector3::new(v[3], v[4], v[5]),
-        });
+        rows.push((frame, f[1].to_string(), v));
     }
     Ok(rows)
 }

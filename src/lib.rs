@@ -17,6 +17,7 @@ pub mod imageio;
 pub mod joints;
 pub mod maxflow;
 pub mod overlay;
+pub mod poses;
 pub mod runner;
 pub mod skeleton;
 pub mod stages;

@@ -256,3 +256,25 @@ fn same_seed_gives_same_bytes_and_another_seed_differs() {
     assert!(a == b, "same seed, same bytes");
     assert!(a != c, "another seed, other noise");
 }
+
+/// ground_truth/poses.csv holds each frame's true pose in the project's parameters: forward
+/// kinematics of the skeleton under it gives joints.csv.
+#[test]
+fn true_poses_reproduce_the_true_joints() {
+    for (made, name) in [(tripod(), "tripod"), (humanoid(), "humanoid")] {
+        let dir = made.root.join("data").join(name);
+        let skel = Skeleton::read(&dir.join("skeleton.yaml")).unwrap();
+        let poses = hullpose::poses::read(&dir.join("ground_truth/poses.csv"), &skel).unwrap();
+        let joints = hullpose::joints::read(&dir.join("ground_truth/joints.csv")).unwrap();
+        assert_eq!(poses.len() * skel.bones.len(), joints.len());
+        let mut worst: f64 = 0.0;
+        for (frame, pose) in &poses {
+            let posed = hullpose::skeleton::pose::joints(&skel, pose);
+            for r in joints.iter().filter(|r| r.frame == *frame) {
+                let (h, t) = posed[skel.bone_index(&r.bone).unwrap()];
+                worst = worst.max((h - r.head).norm()).max((t - r.tail).norm());
+            }
+        }
+        assert!(worst < 1e-9, "{name}: joints differ by {worst:e} m");
+    }
+}

@@ -8,6 +8,7 @@
 
 use crate::geometry::isosurface::{self, ScalarGrid};
 use crate::geometry::TriMesh;
+pub use crate::skeleton::skinning::segment_distance;
 use crate::skeleton::Skeleton;
 use nalgebra::{Rotation3, Vector3};
 
@@ -33,6 +34,23 @@ pub struct Pose {
 }
 
 impl Pose {
+    /// The same pose in the project's parameters (`crate::skeleton::pose`): each bone's
+    /// rotation relative to its parent's, `L_b = G_parent^T G_b`.
+    pub fn to_local(&self, skeleton: &Skeleton) -> crate::skeleton::Pose {
+        crate::skeleton::Pose {
+            translation: self.root_translation,
+            rotations: skeleton
+                .bones
+                .iter()
+                .enumerate()
+                .map(|(b, bone)| match bone.parent {
+                    None => self.rotations[b],
+                    Some(p) => self.rotations[p].inverse() * self.rotations[b],
+                })
+                .collect(),
+        }
+    }
+
     /// The rest pose of a body with `n` bones.
     pub fn rest(n: usize) -> Pose {
         Pose {
@@ -40,13 +58,6 @@ impl Pose {
             root_translation: Vector3::zeros(),
         }
     }
-}
-
-/// Closest point parameter of `p` on segment `a`-`b` (0 at a, 1 at b) and its distance.
-pub fn segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) -> (f64, f64) {
-    let ab = b - a;
-    let h = ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
-    (h, (p - a - h * ab).norm())
 }
 
 /// Polynomial smooth minimum (blend width `k`).

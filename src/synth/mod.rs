@@ -249,6 +249,15 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         }
     }
     crate::joints::write(&seq_dir.join("ground_truth").join("joints.csv"), &rows)?;
+    let skeleton = &scene.body.skeleton;
+    let local: Vec<(u32, crate::skeleton::Pose)> = (scene.poses.iter().enumerate())
+        .map(|(f, p)| (f as u32, p.to_local(skeleton)))
+        .collect();
+    crate::poses::write(
+        &seq_dir.join("ground_truth").join("poses.csv"),
+        skeleton,
+        &local,
+    )?;
     scene.body.skeleton.write(&seq_dir.join("skeleton.yaml"))?;
     crate::camera::write_cameras(&opts.out.join("calib").join("cameras.yaml"), &scene.cameras)?;
     let pipeline_yaml = opts.out.join("pipeline.yaml");

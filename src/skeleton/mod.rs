@@ -8,6 +8,12 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
+pub mod pose;
+pub mod skinning;
+mod tree;
+
+pub use pose::{Pose, PosedBones};
+
 /// One bone at the reference frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bone {
@@ -76,6 +82,11 @@ impl Skeleton {
     }
 
     /// Parses and validates skeleton.yaml text; `path` names the file in errors.
+    ///
+    /// Bones may be listed in any order as long as they form one tree: the bones are
+    /// returned parents first (in file order where the file already is). Refused with a
+    /// clear error: no bone, a bad or duplicate name, an unknown parent, no root or more than
+    /// one, a cycle, a non-finite coordinate, a zero-length bone.
     pub fn parse(path: &Path, text: &str) -> Result<Skeleton> {
         let file: SkeletonFile = crate::yaml::from_str(path, text)?;
         let bad = |msg: String| Error::invalid(path, msg);
@@ -83,33 +94,10 @@ impl Skeleton {
             return Err(bad("the skeleton has no bone".into()));
         }
         let mut index: HashMap<&str, usize> = HashMap::new();
-        let mut bones = Vec::with_capacity(file.bones.len());
         for (i, e) in file.bones.iter().enumerate() {
             crate::camera::check_name(&e.name).map_err(|m| bad(format!("bone {i}: {m}")))?;
             if index.insert(&e.name, i).is_some() {
                 return Err(bad(format!("bone '{}' is declared twice", e.name)));
-            }
-            let parent = match e.parent.as_deref() {
-                None if i == 0 => None,
-                None => {
-                    return Err(bad(format!(
-                        "bone '{}' has no parent, but only the first bone may be the root",
-                        e.name
-                    )))
-                }
-                Some(p) => Some(*index.get(p).ok_or_else(|| {
-                    bad(format!(
-                        "bone '{}' names parent '{p}', which is not declared before it \
-                         (bones must be listed parents first)",
-                        e.name
-                    ))
-                })?),
-            };
-            if i == 0 && parent.is_some() {
-                return Err(bad(format!(
-                    "the first bone '{}' must be the root (parent: null)",
-                    e.name
-                )));
             }
             let head = Vector3::from(e.head);
             let tail = Vector3::from(e.tail);
@@ -125,13 +113,60 @@ impl Skeleton {
                     e.name
                 )));
             }
-            bones.push(Bone {
-                name: e.name.clone(),
-                parent,
-                head,
-                tail,
+        }
+        let mut parents = Vec::with_capacity(file.bones.len());
+        for e in &file.bones {
+            parents.push(match e.parent.as_deref() {
+                None => None,
+                Some(p) => Some(*index.get(p).ok_or_else(|| {
+                    bad(format!(
+                        "bone '{}' names parent '{p}', which is not a bone of this skeleton",
+                        e.name
+                    ))
+                })?),
             });
         }
+        let roots: Vec<&str> = file
+            .bones
+            .iter()
+            .zip(&parents)
+            .filter(|(_, p)| p.is_none())
+            .map(|(e, _)| e.name.as_str())
+            .collect();
+        if roots.len() != 1 {
+            return Err(bad(format!(
+                "a skeleton has exactly one root bone (parent: null); this one has {}{}",
+                roots.len(),
+                if roots.is_empty() {
+                    String::new()
+                } else {
+                    format!(": {}", roots.join(", "))
+                }
+            )));
+        }
+        let order = tree::parents_first(&parents).map_err(|cycle| {
+            let names: Vec<&str> = cycle.iter().map(|&i| file.bones[i].name.as_str()).collect();
+            bad(format!(
+                "the bones' parents form a cycle through {}; a skeleton must be a tree",
+                names.join(" -> ")
+            ))
+        })?;
+        let mut new_index = vec![0; order.len()];
+        for (k, &i) in order.iter().enumerate() {
+            new_index[i] = k;
+        }
+        let bones = order
+            .iter()
+            .map(|&i| {
+                let e = &file.bones[i];
+                Bone {
+                    name: e.name.clone(),
+                    parent: parents[i].map(|p| new_index[p]),
+                    head: Vector3::from(e.head),
+                    tail: Vector3::from(e.tail),
+                }
+            })
+            .collect();
         Ok(Skeleton {
             reference_frame: file.reference_frame,
             bones,
