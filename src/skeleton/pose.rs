@@ -52,7 +52,7 @@ impl Pose {
 
     /// The pose of a parameter vector of length 3 N + 3.
     pub fn from_vector(v: &[f64]) -> Pose {
-        assert!(v.len() >= 3 && v.len() % 3 == 0, "3 N + 3 parameters");
+        assert!(v.len() >= 3 && v.len().is_multiple_of(3), "3 N + 3 parameters");
         Pose {
             translation: Vector3::new(v[0], v[1], v[2]),
             rotations: v[3..]
@@ -154,8 +154,8 @@ impl PosedBones {
         weight: f64,
         columns: &mut [Vector3<f64>],
     ) {
-        for k in 0..3 {
-            columns[k][k] += weight;
+        for (k, column) in columns[..3].iter_mut().enumerate() {
+            column[k] += weight;
         }
         for &a in &self.chains[b] {
             let arm = y - self.heads[a];
