@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::stages::graphcut::{self, GraphcutParams};
+use crate::stages::reliability::{self, ReliabilityParams};
 use crate::stages::silhouette::SilhouetteParams;
 use crate::stages::visual_hull::{self, VisualHullParams};
 use serde::Deserialize;
@@ -59,6 +60,8 @@ struct PipelineFile {
     visual_hull: VisualHullParams,
     #[serde(default)]
     graphcut: GraphcutParams,
+    #[serde(default)]
+    reliability: ReliabilityParams,
 }
 
 fn default_cache() -> PathBuf {
@@ -90,6 +93,8 @@ pub struct Config {
     pub visual_hull: VisualHullParams,
     /// Stage 3 parameters.
     pub graphcut: GraphcutParams,
+    /// Stage 4 parameters.
+    pub reliability: ReliabilityParams,
 }
 
 impl Config {
@@ -114,8 +119,10 @@ impl Config {
             silhouette: file.silhouette,
             visual_hull: file.visual_hull,
             graphcut: file.graphcut,
+            reliability: file.reliability,
         };
         graphcut::validate(&config.graphcut).map_err(|m| Error::invalid(path, m))?;
+        reliability::validate(&config.reliability).map_err(|m| Error::invalid(path, m))?;
         visual_hull::validate(&config.visual_hull).map_err(|m| Error::invalid(path, m))?;
         for (key, p, dir) in [
             ("calibration", &config.calibration, false),

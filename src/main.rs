@@ -230,6 +230,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 hullpose::eval::reconstruction_csv(&rows).as_bytes(),
             )?;
             println!("written to {}", csv.display());
+            let rel = hullpose::eval::reliability::evaluate(&job)?;
+            if !rel.is_empty() {
+                println!(
+                    "\nreliability: ZNCC of true (<= 1 voxel) and false (> 2 voxels) vertices"
+                );
+                print!("{}", hullpose::eval::reliability::table(&rel));
+                let path = job.config.output.join("evaluation").join("reliability.csv");
+                hullpose::fsutil::write_atomic(
+                    &path,
+                    hullpose::eval::reliability::to_csv(&rel).as_bytes(),
+                )?;
+                println!("written to {}", path.display());
+            }
         }
         Command::Bench { what } => match what {
             BenchWhat::VisualHull {

@@ -17,8 +17,8 @@ pub fn mesh_beside_frame(
     mesh: &TriMesh,
 ) -> RgbImage {
     let (w, h) = (cam.width, cam.height);
-    let rays = crate::synth::raster::PixelRays::new(cam);
-    let frags = crate::synth::raster::rasterize(cam, &rays, &mesh.vertices, &mesh.triangles);
+    let rays = crate::geometry::raster::PixelRays::new(cam);
+    let frags = crate::geometry::raster::rasterize(cam, &rays, &mesh.vertices, &mesh.triangles);
     let normals = mesh.vertex_normals();
     let centre = cam.centre();
     let mut out = RgbImage::new(2 * w, h);

@@ -1,5 +1,5 @@
 //! Geometry: triangle meshes and their file formats, voxel grids, distance transforms,
-//! iso-surface extraction, smoothing and nearest-point queries.
+//! iso-surface extraction, rasterization, smoothing and nearest-point queries.
 
 pub mod distance;
 pub mod grid;
@@ -7,6 +7,7 @@ pub mod isosurface;
 pub mod mesh;
 pub mod obj;
 pub mod ply;
+pub mod raster;
 pub mod smooth;
 pub mod spatial;
 

@@ -52,7 +52,10 @@ impl Pose {
 
     /// The pose of a parameter vector of length 3 N + 3.
     pub fn from_vector(v: &[f64]) -> Pose {
-        assert!(v.len() >= 3 && v.len().is_multiple_of(3), "3 N + 3 parameters");
+        assert!(
+            v.len() >= 3 && v.len().is_multiple_of(3),
+            "3 N + 3 parameters"
+        );
         Pose {
             translation: Vector3::new(v[0], v[1], v[2]),
             rotations: v[3..]

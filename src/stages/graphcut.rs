@@ -36,7 +36,8 @@ use crate::camera::Camera;
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
 use crate::maxflow::Graph;
-use nalgebra::Vector3;
+use crate::stages::reliability::sample_patch;
+use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -129,6 +130,100 @@ impl GreyImage {
                 .map(|p| 0.299 * p.0[0] as f32 + 0.587 * p.0[1] as f32 + 0.114 * p.0[2] as f32)
                 .collect(),
         }
+    }
+
+    /// The image smoothed by a separable Gaussian of `sigma` pixels (kernel radius 3 sigma,
+    /// clamped at the borders); `sigma <= 0` returns a copy.
+    pub fn blurred(&self, sigma: f64) -> GreyImage {
+        if sigma <= 0.0 {
+            return GreyImage {
+                w: self.w,
+                h: self.h,
+                px: self.px.clone(),
+            };
+        }
+        let r = (3.0 * sigma).ceil() as usize;
+        let kernel: Vec<f32> = (0..=2 * r)
+            .map(|i| {
+                let d = i as f64 - r as f64;
+                (-(d * d) / (2.0 * sigma * sigma)).exp() as f32
+            })
+            .collect();
+        let total: f32 = kernel.iter().sum();
+        let kernel: Vec<f32> = kernel.iter().map(|k| k / total).collect();
+        let (w, h) = (self.w, self.h);
+        // Horizontal pass, row by row, on a row padded by clamping.
+        let mut tmp = vec![0.0f32; w * h];
+        tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            let row = &self.px[y * w..(y + 1) * w];
+            let padded: Vec<f32> = (0..w + 2 * r)
+                .map(|i| row[(i as i64 - r as i64).clamp(0, w as i64 - 1) as usize])
+                .collect();
+            for (k, kv) in kernel.iter().enumerate() {
+                out.iter_mut()
+                    .zip(&padded[k..k + w])
+                    .for_each(|(o, v)| *o += kv * v);
+            }
+        });
+        // Vertical pass: each output row is a weighted sum of whole rows.
+        let mut px = vec![0.0f32; w * h];
+        px.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            for (k, kv) in kernel.iter().enumerate() {
+                let sy = (y as i64 + k as i64 - r as i64).clamp(0, h as i64 - 1) as usize;
+                let src = &tmp[sy * w..(sy + 1) * w];
+                out.iter_mut().zip(src).for_each(|(o, v)| *o += kv * v);
+            }
+        });
+        GreyImage {
+            w: self.w,
+            h: self.h,
+            px,
+        }
+    }
+
+    /// Samples bilinearly the `window` x `window` grid `origin + i du + j dv` (pixels,
+    /// i and j from -window/2 to window/2) into `out`; false when a sample leaves the image.
+    pub fn sample_grid(
+        &self,
+        origin: Vector2<f64>,
+        du: Vector2<f64>,
+        dv: Vector2<f64>,
+        window: usize,
+        out: &mut [f32],
+    ) -> bool {
+        let half = (window / 2) as f64;
+        // The grid is affine: inside the image iff its four corners are.
+        let (wm, hm) = ((self.w - 1) as f64, (self.h - 1) as f64);
+        for (si, sj) in [(-half, -half), (half, -half), (-half, half), (half, half)] {
+            let q = origin + du * si + dv * sj;
+            if !(q.x >= 0.0 && q.y >= 0.0 && q.x <= wm && q.y <= hm) {
+                return false;
+            }
+        }
+        let (x0, y0) = (
+            (origin.x - half * (du.x + dv.x)) as f32,
+            (origin.y - half * (du.y + dv.y)) as f32,
+        );
+        let (dux, duy, dvx, dvy) = (du.x as f32, du.y as f32, dv.x as f32, dv.y as f32);
+        let w = self.w;
+        let (wl, hl) = (self.w - 1, self.h - 1);
+        for j in 0..window {
+            let (rx, ry) = (x0 + dvx * j as f32, y0 + dvy * j as f32);
+            for i in 0..window {
+                let (x, y) = (
+                    (rx + dux * i as f32).max(0.0),
+                    (ry + duy * i as f32).max(0.0),
+                );
+                let (xi, yi) = ((x as usize).min(wl), (y as usize).min(hl));
+                let (fx, fy) = (x - xi as f32, y - yi as f32);
+                let (x1, y1) = ((xi + 1).min(wl), (yi + 1).min(hl));
+                let p = &self.px;
+                let top = p[yi * w + xi] + (p[yi * w + x1] - p[yi * w + xi]) * fx;
+                let bottom = p[y1 * w + xi] + (p[y1 * w + x1] - p[y1 * w + xi]) * fx;
+                out[j * window + i] = top + (bottom - top) * fy;
+            }
+        }
+        true
     }
 
     /// Bilinear sample at (x, y) pixels; `None` outside.
@@ -425,15 +520,6 @@ pub fn patch_consistency(
     n: &Vector3<f64>,
     surface: &Vector3<f64>,
 ) -> f64 {
-    let half = (p.window / 2) as f64;
-    // Tangent axes of the patch plane.
-    let helper = if n.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let t1 = n.cross(&helper).normalize() * (p.patch_spacing * h);
-    let t2 = n.cross(&t1);
     let mut patches: Vec<(Vector3<f64>, Vec<f32>)> = Vec::new();
     for (c, cam) in cams.iter().enumerate() {
         let centre = cam.centre();
@@ -448,25 +534,8 @@ pub fn patch_consistency(
         if (z as f32) > depth[c][v * cam.width as usize + u] + 1.5 * h as f32 {
             continue; // the hull hides the point from this camera
         }
-        let (Some(xp), Some(a), Some(b)) = (
-            cam.project(x),
-            cam.project(&(x + t1)),
-            cam.project(&(x + t2)),
-        ) else {
-            continue;
-        };
-        let (du, dv) = (a - xp, b - xp);
-        let mut patch = Vec::with_capacity(p.window * p.window);
-        'fill: for j in 0..p.window {
-            for i in 0..p.window {
-                let q = xp + du * (i as f64 - half) + dv * (j as f64 - half);
-                match images[c].sample(q.x, q.y) {
-                    Some(v) => patch.push(v),
-                    None => break 'fill,
-                }
-            }
-        }
-        if patch.len() == p.window * p.window {
+        let step = p.patch_spacing * h;
+        if let Some(patch) = sample_patch(cam, &images[c], x, n, p.window, step) {
             patches.push(((centre - x).normalize(), patch));
         }
     }

@@ -5,6 +5,7 @@
 //! [`StageDef`] adapters here do the file handling around them.
 
 pub mod graphcut;
+pub mod reliability;
 pub mod silhouette;
 pub mod visual_hull;
 
@@ -88,6 +89,15 @@ pub const STAGES: &[StageDef] = &[
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: graphcut_compute,
+    },
+    StageDef {
+        name: "reliability",
+        about: "ZNCC photo-consistency and rho_p of every refined surface vertex",
+        inputs: &["graphcut"],
+        format_version: 1,
+        params: |c| crate::yaml::to_string(&c.reliability).unwrap_or_default(),
+        sources: graphcut_sources,
+        compute: reliability_compute,
     },
 ];
 
@@ -267,6 +277,74 @@ pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Ve
     visual_hull::parse_grid(&path, &data)
 }
 
+/// Loads the frame's images as grey.
+fn grey_frames(ctx: &Context, frame: u32) -> Result<Vec<graphcut::GreyImage>> {
+    let frames: Vec<image::RgbImage> = (0..ctx.sequence.cameras.len())
+        .into_par_iter()
+        .map(|c| ctx.sequence.load_frame(c, frame))
+        .collect::<Result<_>>()?;
+    Ok(graphcut::grey(&frames))
+}
+
+/// Paths of the reliability stage's artifacts of a frame (coloured PLY, compact
+/// observation), relative to its stage folder.
+pub fn reliability_files(frame: u32) -> (String, String) {
+    let stem = frame_stem(frame);
+    (format!("{stem}.ply"), format!("{stem}.obs"))
+}
+
+/// Reads a frame's observed surface with its reliability.
+pub fn load_observed(ctx: &Context, frame: u32) -> Result<reliability::Observed> {
+    let path = ctx
+        .cache
+        .stage_dir("reliability")
+        .join(reliability_files(frame).1);
+    let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    reliability::Observed::parse(&path, &data)
+}
+
+fn reliability_compute(ctx: &Context, frame: u32) -> Result<Output> {
+    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
+    let p = &ctx.config.reliability;
+    let (grid, _) = load_grid(ctx, "graphcut", frame)?;
+    let (ply, _) = hull_files(frame);
+    let mesh = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("graphcut").join(&ply))?;
+    let mut warnings = Vec::new();
+    let observed = if mesh.vertices.is_empty() {
+        warnings.push(format!("frame {frame}: the refined surface is empty"));
+        reliability::Observed::default()
+    } else {
+        let images = grey_frames(ctx, frame)?;
+        reliability::observe(&ctx.sequence.cameras, &images, &mesh, grid.voxel, p)
+    };
+    let (ply, obs) = reliability_files(frame);
+    let dir = ctx.cache.stage_dir("reliability");
+    let normals: Vec<nalgebra::Vector3<f64>> = observed.normals.iter().map(|n| n.cast()).collect();
+    let colours = observed.colours(p);
+    let cameras: Vec<f32> = observed.cameras.iter().map(|&c| c as f32).collect();
+    let attrs = VertexAttributes {
+        normals: Some(&normals),
+        colors: Some(&colours),
+        scalars: vec![
+            ("quality", &observed.zncc),
+            ("zncc", &observed.zncc),
+            ("rho_p", &observed.rho_p),
+            ("cameras", &cameras),
+        ],
+    };
+    write_ply(
+        &dir.join(&ply),
+        &mesh,
+        &attrs,
+        PlyFormat::BinaryLittleEndian,
+    )?;
+    crate::fsutil::write_atomic(&dir.join(&obs), &observed.to_bytes())?;
+    Ok(Output {
+        files: vec![ply, obs],
+        warnings,
+    })
+}
+
 fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let p = &ctx.config.graphcut;
     let (grid, sdf) = load_grid(ctx, "visual_hull", frame)?;
@@ -282,11 +360,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let hull = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
     let cams = &ctx.sequence.cameras;
     let depth = graphcut::depth_maps(cams, &hull, grid.voxel);
-    let frames: Vec<image::RgbImage> = (0..cams.len())
-        .into_par_iter()
-        .map(|c| ctx.sequence.load_frame(c, frame))
-        .collect::<Result<_>>()?;
-    let images = graphcut::grey(&frames);
+    let images = grey_frames(ctx, frame)?;
     // Long cuts report their progress (drawn only when stderr is a terminal).
     let spinner = indicatif::ProgressBar::new_spinner();
     let mut report = |flow: f64, augmentations: u64| {

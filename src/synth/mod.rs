@@ -7,7 +7,6 @@
 
 pub mod body;
 pub mod humanoid;
-pub mod raster;
 pub mod render;
 pub mod rng;
 pub mod scene;
@@ -52,6 +51,9 @@ pub struct SynthOptions {
     pub seed: u64,
     /// Spacing of the rest-surface iso-surface grid, metres.
     pub mesh_spacing: f64,
+    /// Frames before this index are not written (for quick datasets of late frames; the
+    /// written frames keep their indices).
+    pub first_frame: usize,
 }
 
 impl SynthOptions {
@@ -66,6 +68,7 @@ impl SynthOptions {
             frames: None,
             seed: 0,
             mesh_spacing: 0.01,
+            first_frame: 0,
         }
     }
 }
@@ -188,8 +191,11 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
 
     let nf = scene.poses.len();
     let nc = scene.cameras.len();
-    let bar = progress((nf * nc) as u64, "rendering");
-    let jobs: Vec<(usize, usize)> = (0..nf).flat_map(|f| (0..nc).map(move |c| (c, f))).collect();
+    let first = opts.first_frame.min(nf);
+    let bar = progress(((nf - first) * nc) as u64, "rendering");
+    let jobs: Vec<(usize, usize)> = (first..nf)
+        .flat_map(|f| (0..nc).map(move |c| (c, f)))
+        .collect();
     jobs.par_iter().try_for_each(|&(c, f)| -> Result<()> {
         let cam = &scene.cameras[c];
         let (mesh, normals, shadow) = &posed[f];
@@ -225,6 +231,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     posed
         .par_iter()
         .enumerate()
+        .skip(first)
         .try_for_each(|(f, (mesh, normals, _))| {
             let path = seq_dir
                 .join("ground_truth")
@@ -238,7 +245,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         })?;
 
     let mut rows = Vec::new();
-    for (f, pose) in scene.poses.iter().enumerate() {
+    for (f, pose) in scene.poses.iter().enumerate().skip(first) {
         for (b, (head, tail)) in scene.body.joints(pose).into_iter().enumerate() {
             rows.push(JointRow {
                 frame: f as u32,
@@ -250,7 +257,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     }
     crate::joints::write(&seq_dir.join("ground_truth").join("joints.csv"), &rows)?;
     let skeleton = &scene.body.skeleton;
-    let local: Vec<(u32, crate::skeleton::Pose)> = (scene.poses.iter().enumerate())
+    let local: Vec<(u32, crate::skeleton::Pose)> = (scene.poses.iter().enumerate().skip(first))
         .map(|(f, p)| (f as u32, p.to_local(skeleton)))
         .collect();
     crate::poses::write(
@@ -270,7 +277,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         sequence_dir: seq_dir,
         pipeline_yaml,
         cameras: nc,
-        frames: nf,
+        frames: nf - first,
         vertices: subject.rest.vertices.len(),
         seconds: start.elapsed().as_secs_f64(),
     })

@@ -16,6 +16,8 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 
+pub mod reliability;
+
 /// Points on `mesh`'s surface about `spacing` metres apart (deterministic).
 pub fn sample_surface(mesh: &TriMesh, spacing: f64) -> Vec<Vector3<f64>> {
     let mut out = Vec::new();
@@ -57,7 +59,7 @@ pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TriMesh) -> 
 }
 
 /// The true surface sampled every 2 mm, indexed for nearest-point queries.
-fn truth_index(truth: &TriMesh) -> PointIndex {
+pub fn truth_index(truth: &TriMesh) -> PointIndex {
     PointIndex::new(sample_surface(truth, 0.002), 0.01)
 }
 
@@ -149,11 +151,11 @@ pub fn reprojection_coverage(job: &Job, stage: &str, frame: u32) -> Result<Vec<(
 }
 
 /// Per-camera pixel tables (one undistortion per pixel: made once per evaluation).
-fn pixel_tables(job: &Job) -> Vec<crate::synth::raster::PixelRays> {
+fn pixel_tables(job: &Job) -> Vec<crate::geometry::raster::PixelRays> {
     job.sequence
         .cameras
         .par_iter()
-        .map(crate::synth::raster::PixelRays::new)
+        .map(crate::geometry::raster::PixelRays::new)
         .collect()
 }
 
@@ -208,7 +210,7 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
 /// Silhouette coverage per camera of `mesh` reprojected (see [`reprojection_coverage`]).
 fn coverage_of(
     job: &Job,
-    rays: &[crate::synth::raster::PixelRays],
+    rays: &[crate::geometry::raster::PixelRays],
     mesh: &TriMesh,
     frame: u32,
 ) -> Result<Vec<(String, f64)>> {
@@ -220,7 +222,8 @@ fn coverage_of(
         .par_iter()
         .zip(masks.par_iter().zip(rays.par_iter()))
         .map(|(cam, (mask, rays))| {
-            let frags = crate::synth::raster::rasterize(cam, rays, &mesh.vertices, &mesh.triangles);
+            let frags =
+                crate::geometry::raster::rasterize(cam, rays, &mesh.vertices, &mesh.triangles);
             let (mut sil, mut covered) = (0usize, 0usize);
             for (m, f) in mask.as_raw().iter().zip(&frags) {
                 if *m >= 128 {

@@ -120,3 +120,49 @@ pub fn rasterize(
     }
     frags
 }
+
+/// The depth map (metres along the optical axis; infinity where nothing is seen) of a
+/// triangle mesh through `cam`, for visibility tests: vertices are projected through the
+/// full camera model and triangles filled in pixel space with perspective-correct depth.
+/// Edges are straight in pixels, which for triangles a few pixels wide differs from
+/// [`rasterize`] by far less than a pixel; no back-face culling, no pixel table, so it is
+/// cheap enough to run per frame and camera.
+pub fn depth_map(cam: &Camera, vertices: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Vec<f32> {
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let projected: Vec<(Vector2<f64>, f64)> =
+        vertices.iter().map(|v| cam.project_with_depth(v)).collect();
+    let mut depth = vec![f32::INFINITY; w * h];
+    for t in triangles {
+        let [(a, za), (b, zb), (c, zc)] = t.map(|i| projected[i as usize]);
+        if za < NEAR || zb < NEAR || zc < NEAR {
+            continue;
+        }
+        let area = (b - a).perp(&(c - a));
+        if area.abs() < 1e-12 {
+            continue;
+        }
+        let lo_x = a.x.min(b.x).min(c.x).max(0.0).ceil();
+        let hi_x = a.x.max(b.x).max(c.x).min((w - 1) as f64).floor();
+        let lo_y = a.y.min(b.y).min(c.y).max(0.0).ceil();
+        let hi_y = a.y.max(b.y).max(c.y).min((h - 1) as f64).floor();
+        if lo_x > hi_x || lo_y > hi_y {
+            continue;
+        }
+        let inv = [1.0 / za, 1.0 / zb, 1.0 / zc];
+        for y in lo_y as usize..=hi_y as usize {
+            for x in lo_x as usize..=hi_x as usize {
+                let q = Vector2::new(x as f64, y as f64);
+                let l0 = (b - q).perp(&(c - q)) / area;
+                let l1 = (c - q).perp(&(a - q)) / area;
+                let l2 = 1.0 - l0 - l1;
+                if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                    continue;
+                }
+                let z = (1.0 / (l0 * inv[0] + l1 * inv[1] + l2 * inv[2])) as f32;
+                let d = &mut depth[y * w + x];
+                *d = d.min(z);
+            }
+        }
+    }
+    depth
+}

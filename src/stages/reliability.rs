@@ -1,0 +1,377 @@
+//! Stage 4, photo-consistency reliability of every surface vertex (method.md "Stage 4").
+//!
+//! For a vertex u with unit normal n (area-weighted vertex normal of the refined surface):
+//! - **Visibility**: camera c sees u when u faces it within `max_view_angle_deg`
+//!   (n . (c - u) / |c - u| > cos max_view_angle; 90 degrees is plain "facing"; the default
+//!   60 drops oblique views, which see the patch foreshortened more than twice and too
+//!   coarsely to correlate with frontal ones) and c's depth map of the surface
+//!   itself (rasterized; the farthest of the 2 x 2 pixels around u's projection) is not
+//!   closer than u by more than `depth_tolerance` voxels.
+//! - **Patches**: `window` x `window` points spaced `patch_spacing` voxels on u's tangent
+//!   plane, projected into each camera that sees u (affinely, from the projections of u and
+//!   of two tangent steps) and sampled bilinearly in grey. Sampled on the surface, patches
+//!   correspond under wide baselines and have the same metric size at any resolution.
+//! - **ZNCC(u)**: the mean zero-mean normalized cross-correlation over all pairs of those
+//!   cameras (a flat patch correlates 0), in [-1, 1]; -1 when fewer than two cameras see u.
+//! - **rho_p(u)** = 1 / (1 + exp(-alpha_p (ZNCC(u) - tau_p))) (paper eq. 3).
+//!
+//! Patches are normalized once per camera (zero mean, unit norm), so each pair costs one dot
+//! product.
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::geometry::TriMesh;
+use crate::stages::graphcut::GreyImage;
+use nalgebra::{Vector2, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Parameters of the reliability stage (pipeline.yaml key `reliability`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReliabilityParams {
+    /// Patch edge, samples (odd). Default 7.
+    pub window: usize,
+    /// Distance between patch samples on the tangent plane, voxels. Default 0.5.
+    pub patch_spacing: f64,
+    /// Largest angle between the normal and the direction to a camera that sees the vertex,
+    /// degrees. Default 60.
+    pub max_view_angle_deg: f64,
+    /// How much closer than the vertex a camera's depth map may be before the vertex counts
+    /// as hidden, voxels. Default 1.5.
+    pub depth_tolerance: f64,
+    /// Gaussian smoothing of the grey images before sampling, pixels. Default 1.0: removes
+    /// pixel noise and the aliasing of texture near the pixel scale, which otherwise
+    /// decorrelate views of the same surface.
+    pub image_sigma: f64,
+    /// Largest shift along the normal searched for the best ZNCC, voxels. Default 1.0: the
+    /// refined surface is only known to about a voxel, and a patch a voxel off its true
+    /// depth is misaligned between views; the search tests shifts of a quarter voxel up to
+    /// this and keeps the best mean. 0 scores the vertex exactly where it lies.
+    pub normal_search: f64,
+    /// Slope alpha_p of rho_p (paper eq. 3). Default 5.0.
+    pub alpha_p: f64,
+    /// Threshold tau_p of rho_p (paper eq. 3). Default 0.95.
+    pub tau_p: f64,
+}
+
+impl Default for ReliabilityParams {
+    fn default() -> Self {
+        ReliabilityParams {
+            window: 7,
+            patch_spacing: 0.5,
+            max_view_angle_deg: 60.0,
+            depth_tolerance: 1.5,
+            image_sigma: 1.0,
+            normal_search: 1.0,
+            alpha_p: 5.0,
+            tau_p: 0.95,
+        }
+    }
+}
+
+/// Checks parameters that do not depend on the data.
+pub fn validate(p: &ReliabilityParams) -> std::result::Result<(), String> {
+    if p.window < 3 || p.window.is_multiple_of(2) || p.window > 31 {
+        return Err(format!(
+            "reliability.window must be an odd number of samples from 3 to 31, got {}",
+            p.window
+        ));
+    }
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    if !positive(p.patch_spacing) || !positive(p.depth_tolerance) || !positive(p.alpha_p) {
+        return Err(
+            "reliability: patch_spacing, depth_tolerance and alpha_p must be positive numbers"
+                .into(),
+        );
+    }
+    if !(p.max_view_angle_deg > 0.0 && p.max_view_angle_deg <= 90.0) {
+        return Err(format!(
+            "reliability.max_view_angle_deg must lie in (0, 90], got {}",
+            p.max_view_angle_deg
+        ));
+    }
+    let in_range = |v: f64| (0.0..=10.0).contains(&v);
+    if !in_range(p.image_sigma) || !in_range(p.normal_search) {
+        return Err(
+            "reliability: image_sigma (pixels) and normal_search (voxels) must lie in [0, 10]"
+                .into(),
+        );
+    }
+    if !p.tau_p.is_finite() {
+        return Err("reliability.tau_p must be a finite number".into());
+    }
+    Ok(())
+}
+
+/// rho_p of a ZNCC value (paper eq. 3).
+pub fn rho_p(zncc: f64, p: &ReliabilityParams) -> f64 {
+    1.0 / (1.0 + (-p.alpha_p * (zncc - p.tau_p)).exp())
+}
+
+/// The observed surface of one frame with its reliability: what the fit reads.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Observed {
+    /// Vertices, world metres.
+    pub vertices: Vec<Vector3<f32>>,
+    /// Unit outward normals.
+    pub normals: Vec<Vector3<f32>>,
+    /// ZNCC per vertex, [-1, 1]; -1 when fewer than two cameras see it.
+    pub zncc: Vec<f32>,
+    /// rho_p per vertex, (0, 1).
+    pub rho_p: Vec<f32>,
+    /// Number of cameras that see each vertex.
+    pub cameras: Vec<u8>,
+}
+
+/// Magic bytes of the compact observation file.
+const OBS_MAGIC: &[u8; 8] = b"HPOBS001";
+
+impl Observed {
+    /// The compact little-endian form: magic, vertex count (u64), then per vertex
+    /// x y z nx ny nz zncc rho_p (f32) and the camera count (u8).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let n = self.vertices.len();
+        let mut out = Vec::with_capacity(16 + 33 * n);
+        out.extend_from_slice(OBS_MAGIC);
+        out.extend_from_slice(&(n as u64).to_le_bytes());
+        for i in 0..n {
+            let v = &self.vertices[i];
+            let m = &self.normals[i];
+            for x in [v.x, v.y, v.z, m.x, m.y, m.z, self.zncc[i], self.rho_p[i]] {
+                out.extend_from_slice(&x.to_le_bytes());
+            }
+            out.push(self.cameras[i]);
+        }
+        out
+    }
+
+    /// Reads what [`Observed::to_bytes`] wrote; `path` names the file in errors.
+    pub fn parse(path: &Path, data: &[u8]) -> Result<Observed> {
+        let bad = || Error::invalid(path, "not a hullpose observation file (or truncated)");
+        if data.len() < 16 || &data[..8] != OBS_MAGIC {
+            return Err(bad());
+        }
+        let n = u64::from_le_bytes(data[8..16].try_into().unwrap());
+        if n.checked_mul(33).and_then(|b| b.checked_add(16)) != Some(data.len() as u64) {
+            return Err(bad());
+        }
+        let n = n as usize;
+        let mut o = Observed {
+            vertices: Vec::with_capacity(n),
+            normals: Vec::with_capacity(n),
+            zncc: Vec::with_capacity(n),
+            rho_p: Vec::with_capacity(n),
+            cameras: Vec::with_capacity(n),
+        };
+        for rec in data[16..].chunks_exact(33) {
+            let f = |k: usize| f32::from_le_bytes(rec[4 * k..4 * k + 4].try_into().unwrap());
+            o.vertices.push(Vector3::new(f(0), f(1), f(2)));
+            o.normals.push(Vector3::new(f(3), f(4), f(5)));
+            o.zncc.push(f(6));
+            o.rho_p.push(f(7));
+            o.cameras.push(rec[32]);
+        }
+        Ok(o)
+    }
+
+    /// The colour of every vertex as in the paper's figure: blue where consistent, red where
+    /// not (by rho_p relative to its value at ZNCC = 1), grey where fewer than two cameras
+    /// see it.
+    pub fn colours(&self, p: &ReliabilityParams) -> Vec<[u8; 3]> {
+        let top = rho_p(1.0, p) as f32;
+        (0..self.vertices.len())
+            .map(|i| {
+                if self.cameras[i] < 2 {
+                    return [150, 150, 150];
+                }
+                let t = (self.rho_p[i] / top).clamp(0.0, 1.0);
+                [(230.0 * (1.0 - t)) as u8 + 20, 30, (230.0 * t) as u8 + 20]
+            })
+            .collect()
+    }
+}
+
+/// ZNCC and the number of cameras that see it, for every vertex of `mesh` (normals
+/// `normals`), voxel size `h` metres, cameras' depth maps `depth` of the mesh itself.
+pub fn vertex_zncc(
+    cams: &[Camera],
+    images: &[GreyImage],
+    depth: &[Vec<f32>],
+    mesh: &TriMesh,
+    normals: &[Vector3<f64>],
+    h: f64,
+    p: &ReliabilityParams,
+) -> (Vec<f32>, Vec<u8>) {
+    let centres: Vec<Vector3<f64>> = cams.iter().map(Camera::centre).collect();
+    let cos_max = p.max_view_angle_deg.to_radians().cos();
+    let steps = (p.normal_search / 0.25).floor() as i64;
+    let len = p.window * p.window;
+    mesh.vertices
+        .par_iter()
+        .zip(normals.par_iter())
+        .map_init(
+            || (Vec::new(), Vec::<f32>::new()),
+            |(seen, patches): &mut (Vec<usize>, Vec<f32>), (v, n)| {
+                seen.clear();
+                for (c, cam) in cams.iter().enumerate() {
+                    let to_cam = centres[c] - v;
+                    if n.dot(&to_cam) <= cos_max * to_cam.norm() {
+                        continue;
+                    }
+                    let (px, z) = cam.project_with_depth(v);
+                    if z <= 0.0 || !cam.in_image(&px) {
+                        continue;
+                    }
+                    let (w, ht) = (cam.width as usize, cam.height as usize);
+                    let hidden_behind = farthest_around(&depth[c], w, ht, px.x, px.y)
+                        + (p.depth_tolerance * h) as f32;
+                    if (z as f32) <= hidden_behind {
+                        seen.push(c);
+                    }
+                }
+                let k = seen.len();
+                if k < 2 {
+                    return (-1.0, k as u8);
+                }
+                // Mean pair correlation with the patch shifted by `s` quarter voxels along
+                // the normal.
+                let mut score = |s: i64| -> f32 {
+                    let x = v + n * (s as f64 * 0.25 * h);
+                    patches.resize(k * len, 0.0);
+                    for (slot, &c) in seen.iter().enumerate() {
+                        let out = &mut patches[slot * len..(slot + 1) * len];
+                        let ok = patch_grid(&cams[c], &x, n, p.patch_spacing * h).is_some_and(
+                            |(o, du, dv)| images[c].sample_grid(o, du, dv, p.window, out),
+                        );
+                        if ok {
+                            normalize(out);
+                        } else {
+                            out.fill(0.0);
+                        }
+                    }
+                    let mut sum = 0.0f32;
+                    for a in 0..k {
+                        let pa = &patches[a * len..(a + 1) * len];
+                        for b in a + 1..k {
+                            let pb = &patches[b * len..(b + 1) * len];
+                            sum += pa.iter().zip(pb).map(|(x, y)| x * y).sum::<f32>();
+                        }
+                    }
+                    sum / (k * (k - 1) / 2) as f32
+                };
+                // Coarse to fine: half-voxel steps, then the quarter steps around the best.
+                let (mut best, mut at) = (f32::NEG_INFINITY, 0);
+                for s in (-steps..=steps).filter(|s| s % 2 == 0) {
+                    let z = score(s);
+                    if z > best {
+                        (best, at) = (z, s);
+                    }
+                }
+                for s in [at - 1, at + 1] {
+                    if s.abs() <= steps {
+                        best = best.max(score(s));
+                    }
+                }
+                (best.clamp(-1.0, 1.0), k as u8)
+            },
+        )
+        .unzip()
+}
+
+/// The pixel grid of a patch of points spaced `step` metres on the plane through `x` with
+/// normal `n`, as `cam` sees it: the projection of x and the pixel steps of the two tangent
+/// axes (the projection is linearized at x). `None` when x is behind the camera.
+pub fn patch_grid(
+    cam: &Camera,
+    x: &Vector3<f64>,
+    n: &Vector3<f64>,
+    step: f64,
+) -> Option<(Vector2<f64>, Vector2<f64>, Vector2<f64>)> {
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let t1 = n.cross(&helper).normalize() * step;
+    let t2 = n.cross(&t1);
+    let (xp, a, b) = (
+        cam.project(x)?,
+        cam.project(&(x + t1))?,
+        cam.project(&(x + t2))?,
+    );
+    Some((xp, a - xp, b - xp))
+}
+
+/// The grey values of a `window` x `window` patch of points spaced `step` metres on the
+/// plane through `x` with normal `n`, as camera `cam` sees it; `None` when it leaves the
+/// image.
+pub fn sample_patch(
+    cam: &Camera,
+    image: &GreyImage,
+    x: &Vector3<f64>,
+    n: &Vector3<f64>,
+    window: usize,
+    step: f64,
+) -> Option<Vec<f32>> {
+    let (origin, du, dv) = patch_grid(cam, x, n, step)?;
+    let mut patch = vec![0.0; window * window];
+    image
+        .sample_grid(origin, du, dv, window, &mut patch)
+        .then_some(patch)
+}
+
+/// Zero mean and unit norm in place; all zeros for a flat patch (it correlates 0 with
+/// anything).
+fn normalize(patch: &mut [f32]) {
+    let mean = patch.iter().sum::<f32>() / patch.len() as f32;
+    patch.iter_mut().for_each(|v| *v -= mean);
+    let norm = patch.iter().map(|v| v * v).sum::<f32>().sqrt();
+    let scale = if norm < 1e-3 { 0.0 } else { 1.0 / norm };
+    patch.iter_mut().for_each(|v| *v *= scale);
+}
+
+/// Depth maps of a closed mesh through every camera (metres along the optical axis;
+/// infinity where the mesh is not seen), by z-buffer rasterization of its triangles.
+pub fn depth_maps(cams: &[Camera], mesh: &TriMesh) -> Vec<Vec<f32>> {
+    cams.par_iter()
+        .map(|cam| crate::geometry::raster::depth_map(cam, &mesh.vertices, &mesh.triangles))
+        .collect()
+}
+
+/// The farthest depth of the 2 x 2 pixels around the projection `(x, y)`: a vertex is
+/// hidden only if every pixel around it sees something closer.
+fn farthest_around(depth: &[f32], width: usize, height: usize, x: f64, y: f64) -> f32 {
+    let (x0, y0) = (x.floor().max(0.0) as usize, y.floor().max(0.0) as usize);
+    let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
+    depth[y0 * width + x0]
+        .max(depth[y0 * width + x1])
+        .max(depth[y1 * width + x0])
+        .max(depth[y1 * width + x1])
+}
+
+/// The reliability of every vertex of a frame's refined surface.
+pub fn observe(
+    cams: &[Camera],
+    images: &[GreyImage],
+    mesh: &TriMesh,
+    h: f64,
+    p: &ReliabilityParams,
+) -> Observed {
+    let normals = mesh.vertex_normals();
+    let depth = depth_maps(cams, mesh);
+    let images: Vec<GreyImage> = images
+        .par_iter()
+        .map(|g| g.blurred(p.image_sigma))
+        .collect();
+    let images = &images;
+    let (zncc, cameras) = vertex_zncc(cams, images, &depth, mesh, &normals, h, p);
+    Observed {
+        vertices: mesh.vertices.iter().map(|v| v.cast()).collect(),
+        normals: normals.iter().map(|v| v.cast()).collect(),
+        rho_p: zncc.iter().map(|&z| rho_p(z as f64, p) as f32).collect(),
+        zncc,
+        cameras,
+    }
+}
