@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::stages::graphcut::{self, GraphcutParams};
+use crate::stages::model::{self, ModelParams};
 use crate::stages::reliability::{self, ReliabilityParams};
 use crate::stages::silhouette::SilhouetteParams;
 use crate::stages::visual_hull::{self, VisualHullParams};
@@ -62,6 +63,8 @@ struct PipelineFile {
     graphcut: GraphcutParams,
     #[serde(default)]
     reliability: ReliabilityParams,
+    #[serde(default)]
+    model: ModelParams,
 }
 
 fn default_cache() -> PathBuf {
@@ -95,6 +98,8 @@ pub struct Config {
     pub graphcut: GraphcutParams,
     /// Stage 4 parameters.
     pub reliability: ReliabilityParams,
+    /// Stage 5 parameters (`mesh` resolved against the pipeline file's folder).
+    pub model: ModelParams,
 }
 
 impl Config {
@@ -120,9 +125,23 @@ impl Config {
             visual_hull: file.visual_hull,
             graphcut: file.graphcut,
             reliability: file.reliability,
+            model: ModelParams {
+                mesh: file.model.mesh.as_ref().map(|m| base.join(m)),
+                ..file.model
+            },
         };
         graphcut::validate(&config.graphcut).map_err(|m| Error::invalid(path, m))?;
         reliability::validate(&config.reliability).map_err(|m| Error::invalid(path, m))?;
+        model::validate(&config.model).map_err(|m| Error::invalid(path, m))?;
+        if let Some(mesh) = config.model.mesh.as_ref().filter(|m| !m.is_file()) {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "key 'model.mesh': {} does not exist (paths are relative to the pipeline file)",
+                    mesh.display()
+                ),
+            ));
+        }
         visual_hull::validate(&config.visual_hull).map_err(|m| Error::invalid(path, m))?;
         for (key, p, dir) in [
             ("calibration", &config.calibration, false),

@@ -6,7 +6,7 @@ use crate::cache::{ArtifactState, Cache, KeyBuilder, Manifest};
 use crate::config::{Config, FrameRange};
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
-use crate::stages::{self, Context, StageDef, STAGES};
+use crate::stages::{self, Context, Scope, StageDef, STAGES};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -95,14 +95,50 @@ impl Job {
         Context::new(&self.config, &self.sequence, &self.cache)
     }
 
-    /// Cache keys of every stage for every selected frame.
-    fn keys(&self) -> Result<HashMap<(&'static str, u32), String>> {
+    /// The reference frame t0 of the sequence's skeleton, if it has one.
+    pub fn reference_frame(&self) -> Result<Option<u32>> {
+        let Some(skeleton) = self.sequence.skeleton()? else {
+            return Ok(None);
+        };
+        let t0 = skeleton.reference_frame;
+        if !self.sequence.frames.contains(&t0) {
+            return Err(Error::invalid(
+                self.sequence.dir.join("skeleton.yaml"),
+                format!(
+                    "reference_frame {t0} is not a frame of the sequence (frames {}..{})",
+                    self.sequence.frames[0],
+                    self.sequence.frames.last().unwrap()
+                ),
+            ));
+        }
+        Ok(Some(t0))
+    }
+
+    /// The frames a stage makes artifacts for in this job: the selected frames (and t0 when
+    /// a reference stage needs it), or t0 alone for a reference stage; none when the
+    /// sequence has no skeleton.
+    fn stage_frames(&self, stage: &StageDef, reference: Option<u32>) -> Vec<u32> {
+        match stage.scope {
+            Scope::Reference => reference.into_iter().collect(),
+            Scope::PerFrame => {
+                let mut frames = self.frames.clone();
+                if let Some(t0) = reference.filter(|t| !frames.contains(t)) {
+                    frames.push(t0);
+                    frames.sort_unstable();
+                }
+                frames
+            }
+        }
+    }
+
+    /// Cache keys of every stage for every frame it makes artifacts for.
+    fn keys(&self, reference: Option<u32>) -> Result<HashMap<(&'static str, u32), String>> {
         let ctx = self.context();
         let mut keys: HashMap<(&'static str, u32), String> = HashMap::new();
         for stage in STAGES {
             let params = (stage.params)(&self.config);
             let per_frame: Vec<(u32, String)> = self
-                .frames
+                .stage_frames(stage, reference)
                 .par_iter()
                 .map(|&f| -> Result<(u32, String)> {
                     let mut k = KeyBuilder::new();
@@ -176,13 +212,33 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     let plan = plan(opts)?;
     let _lock = job.cache.lock()?;
     job.cache.sweep_temporaries();
-    let keys = job.keys()?;
+    let wants_reference = plan.iter().any(|(s, _)| s.scope == Scope::Reference);
+    let reference = if wants_reference {
+        job.reference_frame()?
+    } else {
+        None
+    };
+    let keys = job.keys(reference)?;
     let ctx = job.context();
     let mut reports = Vec::new();
     for (stage, forced) in plan {
         let start = Instant::now();
-        let todo: Vec<u32> = job
-            .frames
+        let frames = job.stage_frames(stage, reference);
+        if stage.scope == Scope::Reference && frames.is_empty() {
+            reports.push(StageReport {
+                stage: stage.name,
+                computed: 0,
+                reused: 0,
+                seconds: 0.0,
+                location: job.cache.stage_dir(stage.name),
+                warnings: vec![format!(
+                    "{}: the sequence has no skeleton.yaml, so there is no body model or motion",
+                    stage.name
+                )],
+            });
+            continue;
+        }
+        let todo: Vec<u32> = frames
             .iter()
             .copied()
             .filter(|&f| {
@@ -213,7 +269,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
         reports.push(StageReport {
             stage: stage.name,
             computed: todo.len(),
-            reused: job.frames.len() - todo.len(),
+            reused: frames.len() - todo.len(),
             seconds: start.elapsed().as_secs_f64(),
             location: job.cache.stage_dir(stage.name),
             warnings: warnings.into_iter().flatten().collect(),
@@ -224,7 +280,8 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
 
 /// How many selected frames of each stage are up to date, stale or missing.
 pub fn status(job: &Job) -> Result<Vec<StageStatus>> {
-    let keys = job.keys()?;
+    let reference = job.reference_frame()?;
+    let keys = job.keys(reference)?;
     Ok(STAGES
         .iter()
         .map(|s| {
@@ -234,7 +291,7 @@ pub fn status(job: &Job) -> Result<Vec<StageStatus>> {
                 stale: 0,
                 missing: 0,
             };
-            for &f in &job.frames {
+            for f in job.stage_frames(s, reference) {
                 match job.cache.state(s.name, f, &keys[&(s.name, f)]) {
                     ArtifactState::UpToDate => st.up_to_date += 1,
                     ArtifactState::Stale => st.stale += 1,

@@ -44,6 +44,24 @@ impl TriMesh {
             .sum()
     }
 
+    /// Generalized winding number of the surface around `p`: 1 inside a closed outward
+    /// mesh, 0 outside (the sum of the triangles' signed solid angles over 4 pi, Van
+    /// Oosterom and Strackee's formula).
+    pub fn winding_number(&self, p: &Vector3<f64>) -> f64 {
+        let total: f64 = self
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.vertices[i as usize] - p);
+                let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
+                let numerator = a.dot(&b.cross(&c));
+                let denominator = la * lb * lc + a.dot(&b) * lc + b.dot(&c) * la + c.dot(&a) * lb;
+                2.0 * numerator.atan2(denominator)
+            })
+            .sum();
+        total / (4.0 * std::f64::consts::PI)
+    }
+
     /// Axis-aligned bounding box (min, max); `None` for an empty mesh.
     pub fn bounds(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
         let first = *self.vertices.first()?;

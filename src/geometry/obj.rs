@@ -1,7 +1,7 @@
-//! Wavefront OBJ writing (positions, optional normals, triangles).
+//! Wavefront OBJ: writing (positions, optional normals, triangles) and reading (with tobj).
 
 use super::mesh::TriMesh;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use nalgebra::Vector3;
 use std::io::Write;
 use std::path::Path;
@@ -60,4 +60,43 @@ mod tests {
         assert_eq!(text.lines().filter(|l| l.starts_with("vn ")).count(), 3);
         assert!(text.contains("f 1//1 2//2 3//3"));
     }
+}
+
+/// Reads an OBJ file's geometry (every object, polygons triangulated) as one mesh.
+pub fn read_obj(path: &Path) -> Result<TriMesh> {
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: true,
+        ..Default::default()
+    };
+    let (models, _) = tobj::load_obj(path, &options)
+        .map_err(|e| Error::invalid(path, format!("cannot read the OBJ file: {e}")))?;
+    let mut mesh = TriMesh::default();
+    for m in models {
+        let base = mesh.vertices.len() as u32;
+        let p = &m.mesh.positions;
+        if p.len() % 3 != 0 || m.mesh.indices.len() % 3 != 0 {
+            return Err(Error::invalid(path, "malformed OBJ geometry"));
+        }
+        mesh.vertices.extend(
+            p.chunks_exact(3)
+                .map(|v| Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64)),
+        );
+        let n = mesh.vertices.len() as u32;
+        for t in m.mesh.indices.chunks_exact(3) {
+            let tri = [t[0] + base, t[1] + base, t[2] + base];
+            if tri.iter().any(|&i| i >= n) {
+                return Err(Error::invalid(path, "a face refers to a missing vertex"));
+            }
+            mesh.triangles.push(tri);
+        }
+    }
+    if mesh
+        .vertices
+        .iter()
+        .any(|v| !v.iter().all(|x| x.is_finite()))
+    {
+        return Err(Error::invalid(path, "a vertex has a non-finite coordinate"));
+    }
+    Ok(mesh)
 }

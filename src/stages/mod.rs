@@ -5,6 +5,7 @@
 //! [`StageDef`] adapters here do the file handling around them.
 
 pub mod graphcut;
+pub mod model;
 pub mod reliability;
 pub mod silhouette;
 pub mod visual_hull;
@@ -35,9 +36,21 @@ impl<'a> Context<'a> {
     }
 }
 
+/// Which frames a stage makes artifacts for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scope {
+    /// One artifact per selected frame.
+    PerFrame,
+    /// One artifact for the sequence, made from the skeleton's reference frame t0 (the
+    /// artifact is filed under that frame). Skipped when the sequence has no skeleton.yaml.
+    Reference,
+}
+
 /// A stage as the runner sees it.
 pub struct StageDef {
     pub name: &'static str,
+    /// Which frames it makes artifacts for.
+    pub scope: Scope,
     /// What it computes, for `--help` and the README.
     pub about: &'static str,
     /// Upstream stages whose artifacts it reads.
@@ -65,6 +78,7 @@ pub struct Output {
 pub const STAGES: &[StageDef] = &[
     StageDef {
         name: "silhouette",
+        scope: Scope::PerFrame,
         about: "foreground masks: given masks, or background subtraction",
         inputs: &[],
         format_version: 1,
@@ -74,6 +88,7 @@ pub const STAGES: &[StageDef] = &[
     },
     StageDef {
         name: "visual_hull",
+        scope: Scope::PerFrame,
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
         format_version: 2,
@@ -83,21 +98,33 @@ pub const STAGES: &[StageDef] = &[
     },
     StageDef {
         name: "graphcut",
+        scope: Scope::PerFrame,
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["visual_hull"],
-        format_version: 6,
+        format_version: 7,
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: graphcut_compute,
     },
     StageDef {
         name: "reliability",
+        scope: Scope::PerFrame,
         about: "ZNCC photo-consistency and rho_p of every refined surface vertex",
         inputs: &["graphcut"],
         format_version: 1,
         params: |c| crate::yaml::to_string(&c.reliability).unwrap_or_default(),
         sources: graphcut_sources,
         compute: reliability_compute,
+    },
+    StageDef {
+        name: "model",
+        scope: Scope::Reference,
+        about: "skin-bone body model from the reference frame's surface and the skeleton",
+        inputs: &["graphcut"],
+        format_version: 1,
+        params: |c| crate::yaml::to_string(&c.model).unwrap_or_default(),
+        sources: model::sources,
+        compute: model::compute,
     },
 ];
 
