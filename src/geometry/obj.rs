@@ -42,26 +42,6 @@ pub fn write_obj(path: &Path, mesh: &TriMesh, normals: Option<&[Vector3<f64>]>) 
     crate::fsutil::write_atomic_with(path, |w| write_obj_to(w, mesh, normals))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn writes_vertices_normals_and_one_based_faces() {
-        let mesh = TriMesh {
-            vertices: vec![Vector3::zeros(), Vector3::x(), Vector3::y()],
-            triangles: vec![[0, 1, 2]],
-        };
-        let normals = mesh.vertex_normals();
-        let mut buf = Vec::new();
-        write_obj_to(&mut buf, &mesh, Some(&normals)).unwrap();
-        let text = String::from_utf8(buf).unwrap();
-        assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 3);
-        assert_eq!(text.lines().filter(|l| l.starts_with("vn ")).count(), 3);
-        assert!(text.contains("f 1//1 2//2 3//3"));
-    }
-}
-
 /// Reads an OBJ file's geometry (every object, polygons triangulated) as one mesh.
 pub fn read_obj(path: &Path) -> Result<TriMesh> {
     let options = tobj::LoadOptions {
@@ -99,4 +79,24 @@ pub fn read_obj(path: &Path) -> Result<TriMesh> {
         return Err(Error::invalid(path, "a vertex has a non-finite coordinate"));
     }
     Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_vertices_normals_and_one_based_faces() {
+        let mesh = TriMesh {
+            vertices: vec![Vector3::zeros(), Vector3::x(), Vector3::y()],
+            triangles: vec![[0, 1, 2]],
+        };
+        let normals = mesh.vertex_normals();
+        let mut buf = Vec::new();
+        write_obj_to(&mut buf, &mesh, Some(&normals)).unwrap();
+        let text = String::from_utf8(buf).unwrap();
+        assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 3);
+        assert_eq!(text.lines().filter(|l| l.starts_with("vn ")).count(), 3);
+        assert!(text.contains("f 1//1 2//2 3//3"));
+    }
 }
