@@ -6,6 +6,7 @@ use crate::geometry::isosurface::{self, ScalarGrid};
 use crate::runner::Job;
 use crate::stages::visual_hull::{self, MaskCounts};
 use nalgebra::Vector3;
+use std::fmt::Write as _;
 use std::time::Instant;
 
 fn best_of<T>(repeat: usize, mut f: impl FnMut() -> T) -> (f64, T) {
@@ -167,4 +168,110 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         "refine total", t_refine * 1e3,
         "mesh", t_mesh * 1e3,
     ))
+}
+
+/// Times the reliability stage's steps on one frame: image loading and smoothing, depth
+/// maps, and the ZNCC of every vertex (patch sampling included), with its throughput in
+/// vertex-camera-pairs per second (one pair = one ZNCC of two cameras' patches at one
+/// normal shift). With `dump`, also writes `pairs` pairs of raw patches sampled on the
+/// surface (little-endian f32, window^2 values per patch, two patches per pair) and times
+/// the crate's ZNCC on exactly those, for `tools/bench_zncc.py`.
+pub fn reliability(
+    job: &Job,
+    frame: u32,
+    dump: Option<&std::path::Path>,
+    pairs: usize,
+) -> Result<String> {
+    use crate::stages::reliability;
+    use rayon::prelude::*;
+    let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
+    let p = &job.config.reliability;
+    let cams = &job.sequence.cameras;
+    let (grid, _) = crate::stages::load_grid(&ctx, "graphcut", frame)?;
+    let (ply, _) = crate::stages::hull_files(frame);
+    let mesh = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("graphcut").join(ply))?;
+    let h = grid.voxel;
+    let start = Instant::now();
+    let frames: Vec<image::RgbImage> = (0..cams.len())
+        .into_par_iter()
+        .map(|c| job.sequence.load_frame(c, frame))
+        .collect::<Result<_>>()?;
+    let t_load = start.elapsed().as_secs_f64();
+    let (t_blur, images) = best_of(1, || {
+        crate::stages::graphcut::grey(&frames)
+            .par_iter()
+            .map(|g| g.blurred(p.image_sigma))
+            .collect::<Vec<_>>()
+    });
+    let (t_depth, depth) = best_of(1, || reliability::depth_maps(cams, &mesh));
+    let normals = mesh.vertex_normals();
+    let (t_zncc, (_, seen)) = best_of(3, || {
+        reliability::vertex_zncc(cams, &images, &depth, &mesh, &normals, h, p)
+    });
+    let steps = (p.normal_search / 0.25).floor() as usize;
+    let evaluations = steps.div_ceil(2) * 2 + 1 + if steps > 0 { 2 } else { 0 };
+    let camera_pairs: usize = seen
+        .iter()
+        .map(|&k| k as usize)
+        .filter(|&k| k >= 2)
+        .map(|k| k * (k - 1) / 2)
+        .sum();
+    let evaluated = camera_pairs * evaluations;
+    let mut out = format!(
+        "reliability bench, frame {frame}: {} vertices, {} cameras, voxel {h} m\n\
+         load images     {:>8.1} ms\n\
+         grey + blur     {:>8.1} ms\n\
+         depth maps      {:>8.1} ms\n\
+         zncc            {:>8.1} ms  ({} camera pairs x {} normal shifts = {:.2} M pair-ZNCCs, \
+         {:.2} M pairs/s, sampling included)\n",
+        mesh.vertices.len(),
+        cams.len(),
+        t_load * 1e3,
+        t_blur * 1e3,
+        t_depth * 1e3,
+        t_zncc * 1e3,
+        camera_pairs,
+        evaluations,
+        evaluated as f64 / 1e6,
+        evaluated as f64 / t_zncc / 1e6,
+    );
+    if let Some(path) = dump {
+        // Raw patch pairs at the vertices' own positions, from the first cameras that see
+        // each vertex.
+        let window = p.window;
+        let len = window * window;
+        let mut data: Vec<f32> = Vec::with_capacity(2 * pairs * len);
+        'vertices: for (v, n) in mesh.vertices.iter().zip(&normals) {
+            let patches: Vec<Vec<f32>> = cams
+                .iter()
+                .zip(&images)
+                .filter(|(cam, _)| n.dot(&(cam.centre() - v)) > 0.5 * (cam.centre() - v).norm())
+                .filter_map(|(cam, img)| {
+                    reliability::sample_patch(cam, img, v, n, window, p.patch_spacing * h)
+                })
+                .collect();
+            for a in 0..patches.len() {
+                for b in a + 1..patches.len() {
+                    if data.len() >= 2 * pairs * len {
+                        break 'vertices;
+                    }
+                    data.extend(&patches[a]);
+                    data.extend(&patches[b]);
+                }
+            }
+        }
+        let got = data.len() / (2 * len);
+        let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+        crate::fsutil::write_atomic(path, &bytes)?;
+        let (t_pairs, mean) = best_of(5, || reliability::zncc_of_pairs(&data, len));
+        let _ = writeln!(
+            out,
+            "dumped {got} patch pairs ({window}x{window}) to {}\n\
+             zncc of the dumped pairs: {:.1} ms, {:.2} M pairs/s (mean zncc {mean:.4})",
+            path.display(),
+            t_pairs * 1e3,
+            got as f64 / t_pairs / 1e6
+        );
+    }
+    Ok(out)
 }

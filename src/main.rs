@@ -141,6 +141,19 @@ enum BenchWhat {
         #[arg(long, default_value_t = 64)]
         size: usize,
     },
+    /// The reliability stage's steps on one frame (needs the frame's refined surface in the
+    /// cache); `--dump-patches` also writes normalized-free raw patch pairs for a comparison.
+    Reliability {
+        file: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        frame: u32,
+        /// Write PAIRS patch pairs (f32, window^2 values each) to this file and time the
+        /// crate's ZNCC on them.
+        #[arg(long)]
+        dump_patches: Option<PathBuf>,
+        #[arg(long, default_value_t = 200_000)]
+        pairs: usize,
+    },
     /// Iso-surface extraction of a sphere on an N^3 grid.
     Meshing {
         #[arg(long, default_value_t = 256)]
@@ -260,6 +273,18 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             BenchWhat::Graphcut { file, frame } => {
                 let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
                 print!("{}", hullpose::bench::graphcut(&job, frame)?);
+            }
+            BenchWhat::Reliability {
+                file,
+                frame,
+                dump_patches,
+                pairs,
+            } => {
+                let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
+                print!(
+                    "{}",
+                    hullpose::bench::reliability(&job, frame, dump_patches.as_deref(), pairs)?
+                );
             }
             BenchWhat::Maxflow { size } => print!("{}", hullpose::bench::maxflow_fixture(size)),
             BenchWhat::Meshing { size, repeat } => {

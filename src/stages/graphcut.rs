@@ -192,35 +192,33 @@ impl GreyImage {
         out: &mut [f32],
     ) -> bool {
         let half = (window / 2) as f64;
-        // The grid is affine: inside the image iff its four corners are.
-        let (wm, hm) = ((self.w - 1) as f64, (self.h - 1) as f64);
+        // The grid is affine: inside the image iff its four corners are. A small margin
+        // below the last row and column keeps every sample's right and lower neighbours in
+        // the image despite f32 rounding.
+        let (wm, hm) = ((self.w - 1) as f64 - 1e-3, (self.h - 1) as f64 - 1e-3);
         for (si, sj) in [(-half, -half), (half, -half), (-half, half), (half, half)] {
             let q = origin + du * si + dv * sj;
             if !(q.x >= 0.0 && q.y >= 0.0 && q.x <= wm && q.y <= hm) {
                 return false;
             }
         }
-        let (x0, y0) = (
-            (origin.x - half * (du.x + dv.x)) as f32,
-            (origin.y - half * (du.y + dv.y)) as f32,
-        );
+        let x0 = (origin.x - half * (du.x + dv.x)) as f32;
+        let y0 = (origin.y - half * (du.y + dv.y)) as f32;
         let (dux, duy, dvx, dvy) = (du.x as f32, du.y as f32, dv.x as f32, dv.y as f32);
         let w = self.w;
-        let (wl, hl) = (self.w - 1, self.h - 1);
-        for j in 0..window {
+        let p = &self.px;
+        for (j, row) in out.chunks_exact_mut(window).take(window).enumerate() {
             let (rx, ry) = (x0 + dvx * j as f32, y0 + dvy * j as f32);
-            for i in 0..window {
-                let (x, y) = (
-                    (rx + dux * i as f32).max(0.0),
-                    (ry + duy * i as f32).max(0.0),
-                );
-                let (xi, yi) = ((x as usize).min(wl), (y as usize).min(hl));
+            for (i, o) in row.iter_mut().enumerate() {
+                let (x, y) = (rx + dux * i as f32, ry + duy * i as f32);
+                let (xi, yi) = (x as usize, y as usize);
                 let (fx, fy) = (x - xi as f32, y - yi as f32);
-                let (x1, y1) = ((xi + 1).min(wl), (yi + 1).min(hl));
-                let p = &self.px;
-                let top = p[yi * w + xi] + (p[yi * w + x1] - p[yi * w + xi]) * fx;
-                let bottom = p[y1 * w + xi] + (p[y1 * w + x1] - p[y1 * w + xi]) * fx;
-                out[j * window + i] = top + (bottom - top) * fy;
+                let k = yi * w + xi;
+                let (a, b) = (p[k], p[k + 1]);
+                let (c, d) = (p[k + w], p[k + w + 1]);
+                let top = a + (b - a) * fx;
+                let bottom = c + (d - c) * fx;
+                *o = top + (bottom - top) * fy;
             }
         }
         true
