@@ -21,7 +21,17 @@ fn late_tripod() -> tempfile::TempDir {
 fn zncc_separates_true_from_false_surface() {
     let dir = late_tripod();
     let d = dir.path();
-    let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--frames", "6..13"], d);
+    let (ok, _, err) = run_cli(
+        &[
+            "run",
+            "pipeline.yaml",
+            "--frames",
+            "6..13",
+            "--until",
+            "reliability",
+        ],
+        d,
+    );
     assert!(ok, "{err}");
     let (ok, out, err) = run_cli(&["evaluate", "pipeline.yaml", "--frames", "6..13"], d);
     assert!(ok, "{err}");
