@@ -202,3 +202,65 @@ impl Skeleton {
         crate::fsutil::write_atomic(path, self.to_yaml().as_bytes())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::Skeleton;
+    use std::path::Path;
+
+    fn parse(bones: &str) -> Result<Skeleton, String> {
+        Skeleton::parse(
+            Path::new("skeleton.yaml"),
+            &format!("reference_frame: 0\nbones:\n{bones}"),
+        )
+        .map_err(|e| e.to_string())
+    }
+
+    fn bone(name: &str, parent: &str, tail_x: f64) -> String {
+        format!(
+            "  - name: {name}\n    parent: {parent}\n    head: [0, 0, 0]\n    tail: [{tail_x}, 0, 1]\n"
+        )
+    }
+
+    #[test]
+    fn bad_skeletons_are_refused_naming_the_bone() {
+        let cases = [
+            (
+                bone("a", "null", 0.0) + &bone("b", "nope", 0.0),
+                "parent 'nope'",
+            ),
+            (
+                bone("a", "null", 0.0) + &bone("a", "a", 0.0),
+                "'a' is declared twice",
+            ),
+            (
+                bone("a", "null", 0.0) + &bone("b", "null", 0.0),
+                "exactly one root",
+            ),
+            (
+                bone("r", "null", 0.0) + &bone("a", "b", 0.0) + &bone("b", "a", 0.0),
+                "cycle through a -> b",
+            ),
+            (
+                "  - name: z\n    parent: null\n    head: [1, 1, 1]\n    tail: [1, 1, 1]\n"
+                    .to_string(),
+                "'z' has zero length",
+            ),
+            (bone("a/b", "null", 0.0), "must not contain '/'"),
+        ];
+        for (yaml, expected) in cases {
+            let err = parse(&yaml).unwrap_err();
+            assert!(
+                err.contains(expected) && err.contains("skeleton.yaml"),
+                "{err}"
+            );
+        }
+    }
+
+    #[test]
+    fn children_listed_before_parents_are_reordered() {
+        let s = parse(&(bone("b", "a", 1.0) + &bone("a", "null", 0.0))).unwrap();
+        assert_eq!(s.bones[0].name, "a");
+        assert_eq!(s.bones[1].parent, Some(0));
+    }
+}
