@@ -187,7 +187,7 @@ pub fn reliability(
     let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let p = &job.config.reliability;
     let cams = &job.sequence.cameras;
-    let (grid, _) = crate::stages::load_grid(&ctx, "graphcut", frame)?;
+    let grid = crate::stages::load_grid_spec(&ctx, "graphcut", frame)?;
     let (ply, _) = crate::stages::hull_files(frame);
     let mesh = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("graphcut").join(ply))?;
     let h = grid.voxel;

@@ -52,9 +52,9 @@ fn posing_errors(made: &Made, seq: &str, model: &BodyModel, clearance: f64) -> V
         .collect()
 }
 
-fn build(made: &Made, seq: &str, extra: &str) -> (tempfile::TempDir, BodyModel) {
-    let dir = run_folder(made, seq, extra);
-    let (ok, out, err) = run_cli(
+/// Runs a folder's pipeline up to the model, on the reference frame only.
+fn run_model(dir: &Path) -> (bool, String, String) {
+    run_cli(
         &[
             "run",
             "pipeline.yaml",
@@ -63,8 +63,13 @@ fn build(made: &Made, seq: &str, extra: &str) -> (tempfile::TempDir, BodyModel) 
             "--until",
             "model",
         ],
-        dir.path(),
-    );
+        dir,
+    )
+}
+
+fn build(made: &Made, seq: &str, extra: &str) -> (tempfile::TempDir, BodyModel) {
+    let dir = run_folder(made, seq, extra);
+    let (ok, out, err) = run_model(dir.path());
     assert!(ok, "{err}");
     assert!(out.contains("model: 1 computed"), "{out}");
     let model = load_model(dir.path());
@@ -135,17 +140,7 @@ fn a_skeleton_outside_the_surface_is_refused() {
         "tripod",
         &format!("model:\n  mesh: {}\n", obj.display()),
     );
-    let (ok, _, err) = run_cli(
-        &[
-            "run",
-            "pipeline.yaml",
-            "--frames",
-            "0..0",
-            "--until",
-            "model",
-        ],
-        run.path(),
-    );
+    let (ok, _, err) = run_model(run.path());
     assert!(!ok);
     assert!(
         err.contains("box.obj") && err.contains("bone 'arm0_upper' lies outside"),

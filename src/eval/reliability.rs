@@ -73,7 +73,7 @@ pub fn evaluate(job: &Job) -> Result<Vec<ReliabilityRow>> {
         };
         let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
         let obs = crate::stages::load_observed(&ctx, frame)?;
-        let (grid, _) = crate::stages::load_grid(&ctx, "graphcut", frame)?;
+        let grid = crate::stages::load_grid_spec(&ctx, "graphcut", frame)?;
         let h = grid.voxel;
         let index = super::truth_index(&truth);
         let distance: Vec<f64> = obs

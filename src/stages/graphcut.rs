@@ -223,21 +223,6 @@ impl GreyImage {
         }
         true
     }
-
-    /// Bilinear sample at (x, y) pixels; `None` outside.
-    pub fn sample(&self, x: f64, y: f64) -> Option<f32> {
-        if x < 0.0 || y < 0.0 || x > (self.w - 1) as f64 || y > (self.h - 1) as f64 {
-            return None;
-        }
-        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(self.w - 1), (y0 + 1).min(self.h - 1));
-        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
-        let p = |x: usize, y: usize| self.px[y * self.w + x];
-        Some(
-            (p(x0, y0) * (1.0 - fx) + p(x1, y0) * fx) * (1.0 - fy)
-                + (p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx) * fy,
-        )
-    }
 }
 
 /// Zero-mean normalized cross-correlation of two equally long samples (0 for flat ones).

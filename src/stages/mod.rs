@@ -296,6 +296,22 @@ fn graphcut_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result<(
     Ok(())
 }
 
+/// Reads a reconstruction stage's cached grid of a frame from its header only (no signed
+/// distance).
+pub fn load_grid_spec(ctx: &Context, stage: &str, frame: u32) -> Result<GridSpec> {
+    use std::io::Read;
+    let (_, grid) = hull_files(frame);
+    let path = ctx.cache.stage_dir(stage).join(grid);
+    let mut file = std::fs::File::open(&path).map_err(|e| Error::io(&path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(&path, e))?.len();
+    let mut header = Vec::with_capacity(64);
+    (&mut file)
+        .take(64)
+        .read_to_end(&mut header)
+        .map_err(|e| Error::io(&path, e))?;
+    visual_hull::parse_grid_header(&path, &header, len)
+}
+
 /// Reads a reconstruction stage's cached grid and signed distance.
 pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Vec<f32>)> {
     let (_, grid) = hull_files(frame);
@@ -333,7 +349,7 @@ pub fn load_observed(ctx: &Context, frame: u32) -> Result<reliability::Observed>
 fn reliability_compute(ctx: &Context, frame: u32) -> Result<Output> {
     use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let p = &ctx.config.reliability;
-    let (grid, _) = load_grid(ctx, "graphcut", frame)?;
+    let grid = load_grid_spec(ctx, "graphcut", frame)?;
     let (ply, _) = hull_files(frame);
     let mesh = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("graphcut").join(&ply))?;
     let mut warnings = Vec::new();

@@ -602,27 +602,33 @@ pub fn grid_bytes(grid: &GridSpec, sdf: &[f32]) -> Vec<u8> {
     out
 }
 
-/// Reads what [`grid_bytes`] wrote.
-pub fn parse_grid(path: &std::path::Path, data: &[u8]) -> Result<(GridSpec, Vec<f32>)> {
+/// The grid of a [`grid_bytes`] file from its first 64 bytes, checked against the file's
+/// length `len` in bytes.
+pub fn parse_grid_header(path: &std::path::Path, header: &[u8], len: u64) -> Result<GridSpec> {
     let bad = || Error::invalid(path, "not a hullpose grid file (or truncated)");
-    if data.len() < 64 || &data[..8] != GRID_MAGIC {
+    if header.len() < 64 || &header[..8] != GRID_MAGIC {
         return Err(bad());
     }
-    let u = |o: usize| u64::from_le_bytes(data[o..o + 8].try_into().unwrap()) as usize;
-    let f = |o: usize| f64::from_le_bytes(data[o..o + 8].try_into().unwrap());
+    let u = |o: usize| u64::from_le_bytes(header[o..o + 8].try_into().unwrap()) as usize;
+    let f = |o: usize| f64::from_le_bytes(header[o..o + 8].try_into().unwrap());
     let dims = [u(8), u(16), u(24)];
     let n = dims
         .iter()
         .try_fold(1usize, |a, &d| a.checked_mul(d))
         .ok_or_else(bad)?;
-    if data.len() != 64 + 4 * n {
+    if (len as u128) != 64 + 4 * n as u128 {
         return Err(bad());
     }
-    let grid = GridSpec {
+    Ok(GridSpec {
         dims,
         origin: Vector3::new(f(32), f(40), f(48)),
         voxel: f(56),
-    };
+    })
+}
+
+/// Reads what [`grid_bytes`] wrote.
+pub fn parse_grid(path: &std::path::Path, data: &[u8]) -> Result<(GridSpec, Vec<f32>)> {
+    let grid = parse_grid_header(path, data, data.len() as u64)?;
     let sdf = data[64..]
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes(c.try_into().unwrap()))

@@ -160,14 +160,6 @@ impl Body {
             .collect()
     }
 
-    /// The dominant bone of every vertex.
-    pub fn labels(weights: &[Vec<(usize, f64)>]) -> Vec<usize> {
-        weights
-            .iter()
-            .map(|w| w.iter().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap().0)
-            .collect()
-    }
-
     /// Each bone's rigid transform under `pose`.
     pub fn transforms(&self, pose: &Pose) -> Vec<BoneTransform> {
         let mut out: Vec<BoneTransform> = Vec::with_capacity(self.skeleton.bones.len());

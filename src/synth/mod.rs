@@ -123,7 +123,7 @@ impl Subject {
     pub fn new(body: &Body, spacing: f64) -> Subject {
         let rest = body.rest_mesh(spacing);
         let weights = body.skin_weights(&rest, 0.025);
-        let labels = Body::labels(&weights);
+        let labels = crate::skeleton::skinning::labels(&weights);
         let plain = weights
             .iter()
             .map(|w| {
