@@ -2,6 +2,7 @@
 //! file. Unknown keys and wrong types are errors naming the key and the line.
 
 use crate::error::{Error, Result};
+use crate::fit::FitParams;
 use crate::stages::graphcut::{self, GraphcutParams};
 use crate::stages::model::{self, ModelParams};
 use crate::stages::reliability::{self, ReliabilityParams};
@@ -65,6 +66,8 @@ struct PipelineFile {
     reliability: ReliabilityParams,
     #[serde(default)]
     model: ModelParams,
+    #[serde(default)]
+    fit: FitParams,
 }
 
 fn default_cache() -> PathBuf {
@@ -100,6 +103,8 @@ pub struct Config {
     pub reliability: ReliabilityParams,
     /// Stage 5 parameters (`mesh` resolved against the pipeline file's folder).
     pub model: ModelParams,
+    /// Stage 6 parameters.
+    pub fit: FitParams,
 }
 
 impl Config {
@@ -129,10 +134,12 @@ impl Config {
                 mesh: file.model.mesh.as_ref().map(|m| base.join(m)),
                 ..file.model
             },
+            fit: file.fit,
         };
         graphcut::validate(&config.graphcut).map_err(|m| Error::invalid(path, m))?;
         reliability::validate(&config.reliability).map_err(|m| Error::invalid(path, m))?;
         model::validate(&config.model).map_err(|m| Error::invalid(path, m))?;
+        crate::fit::validate(&config.fit).map_err(|m| Error::invalid(path, m))?;
         if let Some(mesh) = config.model.mesh.as_ref().filter(|m| !m.is_file()) {
             return Err(Error::invalid(
                 path,

@@ -86,6 +86,16 @@ enum Command {
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
     },
+    /// Run every fitting method (icp, normals, rho_c, rho_p, proposed) on one sequence over
+    /// the cached reconstruction, and compare their joint errors (the paper's Fig. 8): a
+    /// table, and joints, a CSV and a PNG plot under <output>/ablation/.
+    Ablation {
+        /// The pipeline.yaml.
+        file: PathBuf,
+        /// Frames, A..B inclusive (overrides pipeline.yaml); tracking starts at t0.
+        #[arg(long, value_name = "A..B", value_parser = parse_range)]
+        frames: Option<FrameRange>,
+    },
     /// Time the inner steps of a stage (benchmarks; nothing is written).
     Bench {
         #[command(subcommand)]
@@ -203,6 +213,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 for w in &r.warnings {
                     eprintln!("warning: {w}");
                 }
+                for o in &r.outputs {
+                    println!("{:>12}  wrote {}", "", o.display());
+                }
                 computed += r.computed;
                 reused += r.reused;
             }
@@ -214,8 +227,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 job.config.output.display()
             );
         }
+        Command::Ablation { file, frames } => {
+            let job = Job::load(Config::load(&file)?, frames)?;
+            ablation(&job, frames)?;
+        }
         Command::Evaluate { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
+            evaluate_pose(&job)?;
             if !job
                 .frames
                 .iter()
@@ -369,6 +387,117 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
         }
     }
+    Ok(())
+}
+
+/// The pose part of `evaluate`: joint errors of the run's joints.csv against the ground
+/// truth, when both exist.
+fn evaluate_pose(job: &Job) -> anyhow::Result<()> {
+    let estimate_path = job.config.output.join("joints.csv");
+    let Some(truth) = job.sequence.ground_truth_joints()? else {
+        return Ok(());
+    };
+    if !estimate_path.is_file() {
+        println!(
+            "no {} yet: run the pipeline through the fit stage to evaluate poses",
+            estimate_path.display()
+        );
+        return Ok(());
+    }
+    let estimate: Vec<_> = hullpose::joints::read(&estimate_path)?
+        .into_iter()
+        .filter(|r| job.frames.contains(&r.frame))
+        .collect();
+    let truth_path = job.sequence.dir.join("ground_truth/joints.csv");
+    let errors = vec![(
+        job.config.fit.method.name().to_string(),
+        hullpose::eval::pose::joint_errors(&truth, &estimate, &truth_path)?,
+    )];
+    println!("poses: mean joint error of {}", estimate_path.display());
+    print!("{}", hullpose::eval::pose::table(&errors));
+    let dir = job.config.output.join("evaluation");
+    for f in hullpose::eval::pose::write(&dir, "joint_error", &errors, "mean joint error")? {
+        println!("written to {}", f.display());
+    }
+    println!();
+    Ok(())
+}
+
+/// `pipeline ablation`: every method over the cached reconstruction.
+fn ablation(job: &Job, frames: Option<FrameRange>) -> anyhow::Result<()> {
+    use hullpose::fit::Method;
+    let start = std::time::Instant::now();
+    let opts = RunOptions {
+        until: Some("model".into()),
+        frames,
+        ..Default::default()
+    };
+    let reports = hullpose::runner::run(job, &opts)?;
+    let (computed, reused) = reports
+        .iter()
+        .fold((0, 0), |a, r| (a.0 + r.computed, a.1 + r.reused));
+    println!("reconstruction and model: {computed} computed, {reused} reused");
+    let tracked = job.tracked_frames()?;
+    if tracked.is_empty() {
+        anyhow::bail!(
+            "{} has no skeleton.yaml: there is nothing to fit",
+            job.sequence.dir.display()
+        );
+    }
+    let ctx = job.context();
+    let truth = job.sequence.ground_truth_joints()?;
+    let truth_path = job.sequence.dir.join("ground_truth/joints.csv");
+    let dir = job.config.output.join("ablation");
+    let mut errors = Vec::new();
+    for method in Method::ALL {
+        let t = std::time::Instant::now();
+        let params = hullpose::fit::FitParams {
+            method,
+            ..job.config.fit.clone()
+        };
+        let bar = indicatif::ProgressBar::new(tracked.len() as u64);
+        bar.set_message(method.name());
+        let results = hullpose::stages::fit::track(&ctx, &tracked, &params, &|_| bar.inc(1))?;
+        bar.finish_and_clear();
+        let model = hullpose::stages::model::load(&ctx)?;
+        let rows: Vec<_> = results
+            .iter()
+            .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
+            .collect();
+        let path = dir.join(method.name()).join("joints.csv");
+        hullpose::joints::write(&path, &rows)?;
+        println!(
+            "{:>9}: {} frames in {:.1} s -> {}",
+            method.name(),
+            results.len(),
+            t.elapsed().as_secs_f64(),
+            path.display()
+        );
+        if let Some(truth) = &truth {
+            let selected: Vec<_> = rows
+                .into_iter()
+                .filter(|r| job.frames.contains(&r.frame))
+                .collect();
+            errors.push((
+                method.name().to_string(),
+                hullpose::eval::pose::joint_errors(truth, &selected, &truth_path)?,
+            ));
+        }
+    }
+    if errors.is_empty() {
+        println!("no ground_truth/joints.csv: joints written, nothing to compare");
+    } else {
+        print!("{}", hullpose::eval::pose::table(&errors));
+        for f in hullpose::eval::pose::write(
+            &dir,
+            "joint_error",
+            &errors,
+            "mean joint error per method",
+        )? {
+            println!("written to {}", f.display());
+        }
+    }
+    println!("done in {:.1} s", start.elapsed().as_secs_f64());
     Ok(())
 }
 

@@ -37,6 +37,8 @@ pub struct StageReport {
     pub location: std::path::PathBuf,
     /// Warnings the stage raised (e.g. empty frames).
     pub warnings: Vec<String>,
+    /// Sequence-level files written to the output folder after the stage.
+    pub outputs: Vec<std::path::PathBuf>,
 }
 
 /// Per-stage status for `pipeline status`.
@@ -91,7 +93,7 @@ impl Job {
         })
     }
 
-    fn context(&self) -> Context<'_> {
+    pub fn context(&self) -> Context<'_> {
         Context::new(&self.config, &self.sequence, &self.cache)
     }
 
@@ -114,44 +116,119 @@ impl Job {
         Ok(Some(t0))
     }
 
-    /// The frames a stage makes artifacts for in this job: the selected frames (and t0 when
-    /// a reference stage needs it), or t0 alone for a reference stage; none when the
-    /// sequence has no skeleton.
+    /// The frames a stage makes artifacts for in this job, in the order they are computed.
+    ///
+    /// With a reference frame t0 (a skeleton, and a reference or tracked stage planned):
+    /// a reference stage makes one artifact, at t0; a tracked stage makes every frame of
+    /// the sequence from t0 to the selected frames, t0 first, then forwards and backwards
+    /// from it (each frame starts from its neighbour nearer to t0); a per-frame stage makes
+    /// the selected frames plus those. Without a reference frame: the selected frames, and
+    /// nothing for reference and tracked stages.
     fn stage_frames(&self, stage: &StageDef, reference: Option<u32>) -> Vec<u32> {
+        let Some(t0) = reference else {
+            return match stage.scope {
+                Scope::PerFrame => self.frames.clone(),
+                _ => Vec::new(),
+            };
+        };
+        let first = self.frames.first().map_or(t0, |&f| f.min(t0));
+        let last = self.frames.last().map_or(t0, |&f| f.max(t0));
+        let tracked = || -> Vec<u32> {
+            let after = self
+                .sequence
+                .frames
+                .iter()
+                .copied()
+                .filter(|&f| f >= t0 && f <= last);
+            let before = self
+                .sequence
+                .frames
+                .iter()
+                .rev()
+                .copied()
+                .filter(|&f| f < t0 && f >= first);
+            after.chain(before).collect()
+        };
         match stage.scope {
-            Scope::Reference => reference.into_iter().collect(),
+            Scope::Reference => vec![t0],
+            Scope::Tracked => tracked(),
             Scope::PerFrame => {
                 let mut frames = self.frames.clone();
-                if let Some(t0) = reference.filter(|t| !frames.contains(t)) {
-                    frames.push(t0);
-                    frames.sort_unstable();
-                }
+                frames.extend(tracked());
+                frames.sort_unstable();
+                frames.dedup();
                 frames
             }
         }
     }
 
-    /// Cache keys of every stage for every frame it makes artifacts for.
+    /// The frames a tracked stage (the fit) covers in this job, in computation order; none
+    /// without a skeleton.
+    pub fn tracked_frames(&self) -> Result<Vec<u32>> {
+        let reference = self.reference_frame()?;
+        Ok(self.stage_frames(stages::find("fit")?, reference))
+    }
+
+    /// The frame a tracked stage's frame `f` starts from: its neighbour nearer to t0.
+    pub fn tracked_previous(&self, f: u32, t0: u32) -> Option<u32> {
+        let frames = &self.sequence.frames;
+        let i = frames.iter().position(|&x| x == f)?;
+        match f.cmp(&t0) {
+            std::cmp::Ordering::Equal => None,
+            std::cmp::Ordering::Greater => i.checked_sub(1).map(|j| frames[j]),
+            std::cmp::Ordering::Less => frames.get(i + 1).copied(),
+        }
+    }
+
+    /// Cache keys of every stage for every frame it makes artifacts for. A frame's key
+    /// covers the stage, its format and parameters, its upstream artifacts' keys (a
+    /// reference stage's at t0), its raw inputs, and for a tracked stage the key of the
+    /// frame it starts from.
     fn keys(&self, reference: Option<u32>) -> Result<HashMap<(&'static str, u32), String>> {
         let ctx = self.context();
         let mut keys: HashMap<(&'static str, u32), String> = HashMap::new();
         for stage in STAGES {
             let params = (stage.params)(&self.config);
-            let per_frame: Vec<(u32, String)> = self
-                .stage_frames(stage, reference)
-                .par_iter()
-                .map(|&f| -> Result<(u32, String)> {
-                    let mut k = KeyBuilder::new();
-                    k.add("stage", stage.name)
-                        .add("format", &stage.format_version.to_string())
-                        .add("params", &params);
-                    for input in stage.inputs {
-                        let upstream: &String = &keys[&(*input, f)];
-                        k.add(input, upstream);
+            let frames = self.stage_frames(stage, reference);
+            let key_of = |f: u32, keys: &HashMap<(&'static str, u32), String>| -> Result<String> {
+                let mut k = KeyBuilder::new();
+                k.add("stage", stage.name)
+                    .add("format", &stage.format_version.to_string())
+                    .add("params", &params);
+                for input in stage.inputs {
+                    let scope = stages::find(input)?.scope;
+                    let at = if scope == Scope::Reference {
+                        reference.unwrap_or(f)
+                    } else {
+                        f
+                    };
+                    let upstream = keys.get(&(*input, at)).ok_or_else(|| {
+                        Error::Usage(format!(
+                            "{}: no {input} artifact for frame {at}",
+                            stage.name
+                        ))
+                    })?;
+                    k.add(input, upstream);
+                }
+                (stage.sources)(&ctx, f, &mut k)?;
+                Ok(k.finish())
+            };
+            if stage.scope == Scope::Tracked {
+                for &f in &frames {
+                    let mut key = key_of(f, &keys)?;
+                    if let Some(prev) = reference.and_then(|t0| self.tracked_previous(f, t0)) {
+                        let mut k = KeyBuilder::new();
+                        k.add("own", &key)
+                            .add("previous", &keys[&(stage.name, prev)]);
+                        key = k.finish();
                     }
-                    (stage.sources)(&ctx, f, &mut k)?;
-                    Ok((f, k.finish()))
-                })
+                    keys.insert((stage.name, f), key);
+                }
+                continue;
+            }
+            let per_frame: Vec<(u32, String)> = frames
+                .par_iter()
+                .map(|&f| Ok((f, key_of(f, &keys)?)))
                 .collect::<Result<_>>()?;
             for (f, key) in per_frame {
                 keys.insert((stage.name, f), key);
@@ -212,7 +289,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     let plan = plan(opts)?;
     let _lock = job.cache.lock()?;
     job.cache.sweep_temporaries();
-    let wants_reference = plan.iter().any(|(s, _)| s.scope == Scope::Reference);
+    let wants_reference = plan.iter().any(|(s, _)| s.scope != Scope::PerFrame);
     let reference = if wants_reference {
         job.reference_frame()?
     } else {
@@ -224,7 +301,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     for (stage, forced) in plan {
         let start = Instant::now();
         let frames = job.stage_frames(stage, reference);
-        if stage.scope == Scope::Reference && frames.is_empty() {
+        if stage.scope != Scope::PerFrame && frames.is_empty() {
             reports.push(StageReport {
                 stage: stage.name,
                 computed: 0,
@@ -235,6 +312,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
                     "{}: the sequence has no skeleton.yaml, so there is no body model or motion",
                     stage.name
                 )],
+                outputs: Vec::new(),
             });
             continue;
         }
@@ -248,24 +326,33 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             })
             .collect();
         let progress = bar(todo.len(), stage.name);
-        let warnings: Vec<Vec<String>> = todo
-            .par_iter()
-            .map(|&f| -> Result<Vec<String>> {
-                let t = Instant::now();
-                let out = (stage.compute)(&ctx, f)?;
-                job.cache.commit(&Manifest {
-                    stage: stage.name.to_string(),
-                    frame: f,
-                    key: keys[&(stage.name, f)].clone(),
-                    format_version: stage.format_version,
-                    files: out.files,
-                    seconds: t.elapsed().as_secs_f64(),
-                })?;
-                progress.inc(1);
-                Ok(out.warnings)
-            })
-            .collect::<Result<_>>()?;
+        let one = |f: u32| -> Result<Vec<String>> {
+            let t = Instant::now();
+            let out = (stage.compute)(&ctx, f)?;
+            job.cache.commit(&Manifest {
+                stage: stage.name.to_string(),
+                frame: f,
+                key: keys[&(stage.name, f)].clone(),
+                format_version: stage.format_version,
+                files: out.files,
+                seconds: t.elapsed().as_secs_f64(),
+            })?;
+            progress.inc(1);
+            Ok(out.warnings)
+        };
+        // Tracked frames depend on each other: in order, one at a time.
+        let mut warnings: Vec<Vec<String>> = if stage.scope == Scope::Tracked {
+            todo.iter().map(|&f| one(f)).collect::<Result<_>>()?
+        } else {
+            todo.par_iter().map(|&f| one(f)).collect::<Result<_>>()?
+        };
         progress.finish_and_clear();
+        let mut outputs = Vec::new();
+        if let Some(finish) = stage.finish {
+            let (files, w) = finish(&ctx, &frames)?;
+            outputs = files;
+            warnings.push(w);
+        }
         reports.push(StageReport {
             stage: stage.name,
             computed: todo.len(),
@@ -273,6 +360,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             seconds: start.elapsed().as_secs_f64(),
             location: job.cache.stage_dir(stage.name),
             warnings: warnings.into_iter().flatten().collect(),
+            outputs,
         });
     }
     Ok(reports)

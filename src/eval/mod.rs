@@ -16,6 +16,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 
+pub mod pose;
 pub mod reliability;
 
 /// Points on `mesh`'s surface about `spacing` metres apart (deterministic).

@@ -5,6 +5,7 @@ pub mod distance;
 pub mod grid;
 pub mod isosurface;
 pub mod mesh;
+pub mod nearest;
 pub mod obj;
 pub mod ply;
 pub mod raster;

@@ -16,8 +16,10 @@ pub fn segment_distance(p: &Vector3<f64>, a: &Vector3<f64>, b: &Vector3<f64>) ->
     (h, (p - a - h * ab).norm())
 }
 
-/// Bones that meet bone `b` at a joint: its parent, its children, and its siblings (which
-/// share the parent's joint).
+/// Bones that meet bone `b` at a joint: its parent and its children, and the bones whose
+/// head lies at b's head (siblings rooted at the same joint, or a child rooted at its
+/// parent's head, as the tripod's arms are at the hub), within 1 mm. Siblings hung from
+/// different points of their parent (a thigh and an arm under a torso) do not meet.
 pub fn joint_neighbours(skeleton: &Skeleton, b: usize) -> Vec<usize> {
     let bones = &skeleton.bones;
     (0..bones.len())
@@ -25,7 +27,7 @@ pub fn joint_neighbours(skeleton: &Skeleton, b: usize) -> Vec<usize> {
             o != b
                 && (bones[b].parent == Some(o)
                     || bones[o].parent == Some(b)
-                    || (bones[o].parent.is_some() && bones[o].parent == bones[b].parent))
+                    || (bones[o].head - bones[b].head).norm() < 1e-3)
         })
         .collect()
 }
@@ -125,6 +127,36 @@ pub fn pose_vertex(bones: &PosedBones, v: &Vector3<f64>, w: &Influences) -> Vect
     w.iter().map(|&(b, wb)| wb * bones.transform(b, v)).sum()
 }
 
+/// The Jacobian of the posed t0 vertex `v` with respect to the pose increments, keeping
+/// only what is not zero: the translation block is the identity (the weights sum to 1), and
+/// `blocks` is overwritten with (bone, its three columns) for every bone on the chains of
+/// `v`'s influences (see [`PosedBones::add_point_jacobian`]).
+pub fn sparse_vertex_jacobian(
+    bones: &PosedBones,
+    v: &Vector3<f64>,
+    w: &Influences,
+    blocks: &mut Vec<(usize, [Vector3<f64>; 3])>,
+) {
+    blocks.clear();
+    for &(b, wb) in w {
+        let y = bones.transform(b, v);
+        for &a in &bones.chains[b] {
+            let at = match blocks.iter().position(|x| x.0 == a) {
+                Some(i) => i,
+                None => {
+                    blocks.push((a, [Vector3::zeros(); 3]));
+                    blocks.len() - 1
+                }
+            };
+            let arm = y - bones.heads[a];
+            let axes = &bones.increment_axes[a];
+            for k in 0..3 {
+                blocks[at].1[k] += wb * axes.column(k).cross(&arm);
+            }
+        }
+    }
+}
+
 /// The Jacobian of the posed t0 vertex `v` with respect to the pose increments: `columns`
 /// (one 3-vector per parameter, 3 N + 3) is overwritten. Linear blend skinning is a weighted
 /// sum of rigid motions, so the Jacobian is the weighted sum of theirs.
@@ -207,6 +239,27 @@ mod tests {
             }
         }
         assert!(worst <= 1e-5, "worst relative Jacobian error {worst:e}");
+        // The sparse form holds the same numbers.
+        let pose = Pose::rest(skel.bones.len()).apply_increment(&[0.1; 15]);
+        let bones = PosedBones::new(&skel, &pose);
+        let mut dense = vec![Vector3::zeros(); 15];
+        let mut blocks = Vec::new();
+        for (v, w) in vertices.iter().zip(&weights) {
+            vertex_jacobian(&bones, v, w, &mut dense);
+            sparse_vertex_jacobian(&bones, v, w, &mut blocks);
+            let mut rebuilt = vec![Vector3::zeros(); 15];
+            for k in 0..3 {
+                rebuilt[k][k] = 1.0;
+            }
+            for (b, cols) in &blocks {
+                for k in 0..3 {
+                    rebuilt[3 + 3 * b + k] = cols[k];
+                }
+            }
+            for (a, b) in dense.iter().zip(&rebuilt) {
+                assert!((a - b).norm() < 1e-12);
+            }
+        }
     }
 
     #[test]

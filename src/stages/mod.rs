@@ -4,6 +4,7 @@
 //! The algorithms live in one module per stage as plain functions on typed data; the
 //! [`StageDef`] adapters here do the file handling around them.
 
+pub mod fit;
 pub mod graphcut;
 pub mod model;
 pub mod reliability;
@@ -44,6 +45,9 @@ pub enum Scope {
     /// One artifact for the sequence, made from the skeleton's reference frame t0 (the
     /// artifact is filed under that frame). Skipped when the sequence has no skeleton.yaml.
     Reference,
+    /// One artifact per frame from t0 to the selected frames, computed in order from t0,
+    /// each from its neighbour's (the fit). Skipped when the sequence has no skeleton.yaml.
+    Tracked,
 }
 
 /// A stage as the runner sees it.
@@ -63,6 +67,9 @@ pub struct StageDef {
     pub sources: fn(&Context, u32, &mut KeyBuilder) -> Result<()>,
     /// Computes and writes the artifact files of a frame.
     pub compute: fn(&Context, u32) -> Result<Output>,
+    /// After the stage: writes sequence-level outputs from the frames' artifacts (the
+    /// frames in computation order); returns the files and warnings.
+    pub finish: Option<fn(&Context, &[u32]) -> Result<(Vec<std::path::PathBuf>, Vec<String>)>>,
 }
 
 /// What a stage wrote for one frame.
@@ -85,6 +92,7 @@ pub const STAGES: &[StageDef] = &[
         params: |c| crate::yaml::to_string(&c.silhouette).unwrap_or_default(),
         sources: silhouette_sources,
         compute: silhouette_compute,
+        finish: None,
     },
     StageDef {
         name: "visual_hull",
@@ -95,6 +103,7 @@ pub const STAGES: &[StageDef] = &[
         params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
         sources: visual_hull_sources,
         compute: visual_hull_compute,
+        finish: None,
     },
     StageDef {
         name: "graphcut",
@@ -105,6 +114,7 @@ pub const STAGES: &[StageDef] = &[
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: graphcut_compute,
+        finish: None,
     },
     StageDef {
         name: "reliability",
@@ -115,6 +125,7 @@ pub const STAGES: &[StageDef] = &[
         params: |c| crate::yaml::to_string(&c.reliability).unwrap_or_default(),
         sources: graphcut_sources,
         compute: reliability_compute,
+        finish: None,
     },
     StageDef {
         name: "model",
@@ -125,6 +136,18 @@ pub const STAGES: &[StageDef] = &[
         params: |c| crate::yaml::to_string(&c.model).unwrap_or_default(),
         sources: model::sources,
         compute: model::compute,
+        finish: None,
+    },
+    StageDef {
+        name: "fit",
+        scope: Scope::Tracked,
+        about: "robust articulated fitting of the body model to every frame, tracked from t0",
+        inputs: &["reliability", "model"],
+        format_version: 1,
+        params: |c| crate::yaml::to_string(&c.fit).unwrap_or_default(),
+        sources: fit::sources,
+        compute: fit::compute,
+        finish: Some(fit::finish),
     },
 ];
 

@@ -1,0 +1,551 @@
+//! Robust articulated fitting (method.md "Stage 6"): the pose of the skin-bone model that
+//! best explains one frame's observed surface, starting from the previous frame's pose.
+//!
+//! Per frame, alternate (a) posing the model and finding, both ways, each vertex's nearest
+//! neighbour on the other surface and the pair's weight; (b) Levenberg-Marquardt steps on the
+//! 3N+3 pose increments with the pairs held ([`solve`]); until the joints move less than
+//! `tolerance` in one round or `max_iterations` rounds.
+//!
+//! Paper eq. 4, with each pair weighted by its own two ends (model vertex v, observed u):
+//! `E(p) = sum_pairs rho_c(v)/R_c * rho_p(u)/R_p * |v - u|^2`. The five methods are this one
+//! energy with different weights ([`Method`]).
+
+mod anderson;
+pub mod contact;
+pub mod solve;
+
+use crate::geometry::nearest::NearestTree;
+use crate::geometry::TriMesh;
+use crate::skeleton::model::BodyModel;
+use crate::skeleton::skinning::pose_vertices;
+use crate::skeleton::{Pose, PosedBones};
+use contact::{ContactParams, ContactRule, ContactSearch};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use solve::{HeldProblem, Targets};
+
+/// Which weights the energy uses: the paper's method and the baselines it compares with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Every pair weighs 1 (articulated ICP).
+    Icp,
+    /// Ogawara et al.: pairs whose normals differ by more than `normal_angle_deg` weigh 0,
+    /// the others 1.
+    Normals,
+    /// rho_c(v) only.
+    RhoC,
+    /// rho_p(u) only.
+    RhoP,
+    /// rho_c(v) rho_p(u) (paper eq. 4).
+    Proposed,
+}
+
+impl Method {
+    pub const ALL: [Method; 5] = [
+        Method::Icp,
+        Method::Normals,
+        Method::RhoC,
+        Method::RhoP,
+        Method::Proposed,
+    ];
+
+    /// The name used in pipeline.yaml and in outputs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Icp => "icp",
+            Method::Normals => "normals",
+            Method::RhoC => "rho_c",
+            Method::RhoP => "rho_p",
+            Method::Proposed => "proposed",
+        }
+    }
+
+    fn uses_rho_c(self) -> bool {
+        matches!(self, Method::RhoC | Method::Proposed)
+    }
+
+    fn uses_rho_p(self) -> bool {
+        matches!(self, Method::RhoP | Method::Proposed)
+    }
+}
+
+/// Parameters of the fit stage (pipeline.yaml key `fit`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FitParams {
+    /// `icp`, `normals`, `rho_c`, `rho_p` or `proposed` (default).
+    pub method: Method,
+    /// rho_c's slope, per metre. Default 200 (the paper's 2.0 per cm).
+    pub alpha_c: f64,
+    /// rho_c's mid-point distance, metres. Default 0.025 (the paper's 2.5 cm).
+    pub tau_c: f64,
+    /// Which vertices may be contact partners: `rest_distance` (default) or `adjacent`
+    /// ([`ContactRule`]).
+    pub contact_rule: ContactRule,
+    /// For `rest_distance`: vertices closer than this in the reference pose are never
+    /// contact partners, metres. Default 0.075 (3 tau_c).
+    pub contact_rest_distance: f64,
+    /// For `normals`: pairs whose normals differ by more than this are rejected, degrees.
+    /// Default 45.
+    pub normal_angle_deg: f64,
+    /// Rounds of (correspondences, LM steps) per frame at most. Default 200.
+    pub max_iterations: usize,
+    /// LM steps per round (correspondences held). Default 3.
+    pub lm_steps: usize,
+    /// Spacing of the vertices the energy runs over, metres: the model's and each frame's
+    /// surface are thinned to one vertex per cube of this size (the vertex nearest the
+    /// cube's centre), about the paper's 1 cm triangles. 0 keeps every vertex. Default 0.01.
+    pub sample_spacing: f64,
+    /// Rounds remembered by the Anderson acceleration of the rounds; 0 turns it off.
+    /// Default 5.
+    pub acceleration: usize,
+    /// A frame has converged when no joint moved more than this in a round, metres.
+    /// Default 0.00005.
+    pub tolerance: f64,
+    /// Frames whose observed surface has fewer vertices than this share of the model's keep
+    /// the previous pose (and are flagged). Default 0.05.
+    pub min_observed_share: f64,
+}
+
+impl Default for FitParams {
+    fn default() -> Self {
+        FitParams {
+            method: Method::Proposed,
+            alpha_c: 200.0,
+            tau_c: 0.025,
+            contact_rule: ContactRule::RestDistance,
+            contact_rest_distance: 0.075,
+            normal_angle_deg: 45.0,
+            max_iterations: 200,
+            lm_steps: 3,
+            acceleration: 5,
+            sample_spacing: 0.01,
+            tolerance: 0.00005,
+            min_observed_share: 0.05,
+        }
+    }
+}
+
+/// Checks parameters that do not depend on the data.
+pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    if !positive(p.alpha_c) || !positive(p.tau_c) || !positive(p.contact_rest_distance) {
+        return Err(
+            "fit: alpha_c, tau_c and contact_rest_distance must be positive numbers".into(),
+        );
+    }
+    if !(p.normal_angle_deg > 0.0 && p.normal_angle_deg <= 180.0) {
+        return Err(format!(
+            "fit.normal_angle_deg must be in (0, 180] degrees, got {}",
+            p.normal_angle_deg
+        ));
+    }
+    if p.max_iterations == 0 || p.lm_steps == 0 {
+        return Err("fit: max_iterations and lm_steps must be at least 1".into());
+    }
+    if !(p.sample_spacing >= 0.0 && p.sample_spacing.is_finite()) {
+        return Err(format!(
+            "fit.sample_spacing must be 0 (every vertex) or a spacing in metres, got {}",
+            p.sample_spacing
+        ));
+    }
+    if !positive(p.tolerance) {
+        return Err(format!(
+            "fit.tolerance must be a positive distance in metres, got {}",
+            p.tolerance
+        ));
+    }
+    if !(0.0..1.0).contains(&p.min_observed_share) {
+        return Err(format!(
+            "fit.min_observed_share must be in [0, 1), got {}",
+            p.min_observed_share
+        ));
+    }
+    Ok(())
+}
+
+/// One frame's observed surface (from the reliability stage).
+#[derive(Debug, Clone, Default)]
+pub struct Observation {
+    /// Vertices, world metres.
+    pub vertices: Vec<Vector3<f64>>,
+    /// Unit outward normals.
+    pub normals: Vec<Vector3<f64>>,
+    /// rho_p per vertex, (0, 1).
+    pub rho_p: Vec<f64>,
+}
+
+/// How a frame's fit ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FitStatus {
+    /// The reference frame: the embedded skeleton's pose, not fitted.
+    Reference,
+    /// Converged within the tolerance.
+    Converged,
+    /// Stopped at `max_iterations`.
+    IterationCap,
+    /// Too little observed surface: the previous pose was kept.
+    NoObservation,
+}
+
+impl FitStatus {
+    pub fn name(self) -> &'static str {
+        match self {
+            FitStatus::Reference => "reference",
+            FitStatus::Converged => "converged",
+            FitStatus::IterationCap => "iteration_cap",
+            FitStatus::NoObservation => "no_observation",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<FitStatus> {
+        [
+            FitStatus::Reference,
+            FitStatus::Converged,
+            FitStatus::IterationCap,
+            FitStatus::NoObservation,
+        ]
+        .into_iter()
+        .find(|f| f.name() == s)
+    }
+}
+
+/// Per-frame fit diagnostics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitDiagnostics {
+    pub status: FitStatus,
+    /// Correspondence rounds.
+    pub iterations: usize,
+    /// Accepted LM steps over all rounds.
+    pub lm_steps: usize,
+    /// Paper eq. 4 at the final pose with the final pairs (weights normalized by R_c R_p,
+    /// m^2).
+    pub energy: f64,
+    /// Weighted root-mean-square pair distance at the end, metres.
+    pub rms: f64,
+    /// Share of pairs (both directions) weighing less than 0.5.
+    pub downweighted_share: f64,
+    /// Share of model vertices with rho_c < 0.5 (0 for methods without rho_c).
+    pub contact_share: f64,
+    /// Observed vertices.
+    pub observed: usize,
+}
+
+/// A fitted frame.
+#[derive(Debug, Clone)]
+pub struct FitResult {
+    pub pose: Pose,
+    pub diagnostics: FitDiagnostics,
+}
+
+/// Fits frames of one sequence with one model and one set of parameters.
+pub struct Fitter<'a> {
+    pub model: &'a BodyModel,
+    pub params: FitParams,
+    /// The model's vertices the energy runs over (about one per `sample_spacing`), with
+    /// their reference normals; no triangles.
+    sample: BodyModel,
+    sample_normals: Vec<Vector3<f64>>,
+    contact: ContactSearch,
+    /// Seconds spent per step, summed over every fit (for benchmarks).
+    timings: std::sync::Mutex<Vec<(&'static str, f64)>>,
+}
+
+/// Everything one round's pairs give: the held targets and the energy's bookkeeping.
+struct Round {
+    targets: Targets,
+    /// Sum of w |v - u|^2 over pairs (m^2) and of w.
+    weighted_sq: f64,
+    weight_sum: f64,
+    pairs: usize,
+    downweighted: usize,
+    /// R_c R_p.
+    normalizer: f64,
+    contact_share: f64,
+}
+
+impl Round {
+    /// Paper eq. 4 with these pairs and weights.
+    fn energy(&self) -> f64 {
+        self.weighted_sq / self.normalizer
+    }
+}
+
+impl<'a> Fitter<'a> {
+    pub fn new(model: &'a BodyModel, params: FitParams) -> Fitter<'a> {
+        let normals = model.mesh.vertex_normals();
+        let keep = thin(&model.mesh.vertices, params.sample_spacing);
+        let sample = BodyModel {
+            skeleton: model.skeleton.clone(),
+            mesh: TriMesh {
+                vertices: keep.iter().map(|&i| model.mesh.vertices[i]).collect(),
+                triangles: Vec::new(),
+            },
+            weights: keep.iter().map(|&i| model.weights[i].clone()).collect(),
+            labels: keep.iter().map(|&i| model.labels[i]).collect(),
+        };
+        let sample_normals = keep.iter().map(|&i| normals[i]).collect();
+        let contact = ContactSearch::new(
+            &sample,
+            ContactParams {
+                alpha_c: params.alpha_c,
+                tau_c: params.tau_c,
+                rule: params.contact_rule,
+                rest_distance: params.contact_rest_distance,
+            },
+        );
+        Fitter {
+            model,
+            params,
+            sample,
+            sample_normals,
+            contact,
+            timings: Default::default(),
+        }
+    }
+
+    /// Seconds spent in each step so far, summed over every fit.
+    pub fn timings(&self) -> Vec<(&'static str, f64)> {
+        self.timings.lock().map(|t| t.clone()).unwrap_or_default()
+    }
+
+    fn time<T>(&self, step: &'static str, f: impl FnOnce() -> T) -> T {
+        let start = std::time::Instant::now();
+        let out = f();
+        let dt = start.elapsed().as_secs_f64();
+        if let Ok(mut t) = self.timings.lock() {
+            match t.iter_mut().find(|x| x.0 == step) {
+                Some(x) => x.1 += dt,
+                None => t.push((step, dt)),
+            }
+        }
+        out
+    }
+
+    /// The diagnostics of the reference frame (pose p_t0 = the embedded skeleton).
+    pub fn reference(&self, observed: usize) -> FitResult {
+        FitResult {
+            pose: Pose::rest(self.model.skeleton.bones.len()),
+            diagnostics: FitDiagnostics {
+                status: FitStatus::Reference,
+                iterations: 0,
+                lm_steps: 0,
+                energy: 0.0,
+                rms: 0.0,
+                downweighted_share: 0.0,
+                contact_share: 0.0,
+                observed,
+            },
+        }
+    }
+
+    /// Fits one frame's `obs` starting from `start` (the previous frame's pose).
+    pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
+        let p = &self.params;
+        let model_vertices = self.model.mesh.vertices.len();
+        let mut diagnostics = FitDiagnostics {
+            status: FitStatus::NoObservation,
+            iterations: 0,
+            lm_steps: 0,
+            energy: 0.0,
+            rms: 0.0,
+            downweighted_share: 0.0,
+            contact_share: 0.0,
+            observed: obs.vertices.len(),
+        };
+        if obs.vertices.is_empty()
+            || (obs.vertices.len() as f64) < p.min_observed_share * model_vertices as f64
+        {
+            return FitResult {
+                pose: start.clone(),
+                diagnostics,
+            };
+        }
+        let keep = thin(&obs.vertices, p.sample_spacing);
+        let obs = &Observation {
+            vertices: keep.iter().map(|&i| obs.vertices[i]).collect(),
+            normals: keep.iter().map(|&i| obs.normals[i]).collect(),
+            rho_p: keep.iter().map(|&i| obs.rho_p[i]).collect(),
+        };
+        let obs_tree = NearestTree::new(&obs.vertices);
+        let mut pose = start.clone();
+        let mut round = self.round(obs, &obs_tree, &pose);
+        let mut lambda = 1e-3;
+        let mut accel = anderson::Anderson::new(p.acceleration);
+        diagnostics.status = FitStatus::IterationCap;
+        while diagnostics.iterations < p.max_iterations {
+            let problem = HeldProblem {
+                skeleton: &self.sample.skeleton,
+                rest: &self.sample.mesh.vertices,
+                weights: &self.sample.weights,
+                targets: &round.targets,
+            };
+            let (stepped, report) = self.time("lm steps", || {
+                solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut lambda)
+            });
+            diagnostics.iterations += 1;
+            diagnostics.lm_steps += report.steps;
+            // Point-to-point ICP converges slowly (linearly) where surfaces slide along each
+            // other; Anderson acceleration extrapolates the sequence of rounds, and is kept
+            // only when it lowers the energy (paper eq. 4) below the round it started from.
+            let mut next = stepped.clone();
+            let mut next_round = None;
+            if let Some(extrapolated) = accel.next(&pose.to_vector(), &stepped.to_vector()) {
+                let candidate = Pose::from_vector(&extrapolated);
+                if candidate.is_finite() {
+                    let r = self.round(obs, &obs_tree, &candidate);
+                    if r.energy() < round.energy() {
+                        next = candidate;
+                        next_round = Some(r);
+                    } else {
+                        accel.reset();
+                    }
+                }
+            }
+            let next_round = next_round.unwrap_or_else(|| self.round(obs, &obs_tree, &next));
+            let moved = joint_motion(self.model, &pose, &next);
+            pose = next;
+            round = next_round;
+            if moved < p.tolerance {
+                diagnostics.status = FitStatus::Converged;
+                break;
+            }
+        }
+        // The energy and shares at the final pose, with its own pairs.
+        diagnostics.energy = round.energy();
+        diagnostics.rms = (round.weighted_sq / round.weight_sum.max(1e-300)).sqrt();
+        diagnostics.downweighted_share = round.downweighted as f64 / round.pairs.max(1) as f64;
+        diagnostics.contact_share = round.contact_share;
+        FitResult { pose, diagnostics }
+    }
+
+    /// Step (a): pose the model, its normals and rho_c, pairs both ways and their weights.
+    fn round(&self, obs: &Observation, obs_tree: &NearestTree, pose: &Pose) -> Round {
+        let p = &self.params;
+        let m = &self.sample;
+        let (posed, normals) = self.time("pose, normals", || {
+            let bones = PosedBones::new(&m.skeleton, pose);
+            let posed = pose_vertices(&bones, &m.mesh.vertices, &m.weights);
+            // A normal turns with its vertex's dominant bone.
+            let normals: Vec<Vector3<f64>> = self
+                .sample_normals
+                .iter()
+                .zip(&m.labels)
+                .map(|(n, &l)| bones.rotations[l] * n)
+                .collect();
+            (posed, normals)
+        });
+        let rho_c = if p.method.uses_rho_c() {
+            self.time("rho_c", || self.contact.weights(&posed, &normals))
+        } else {
+            vec![1.0; posed.len()]
+        };
+        let cos_limit = p.normal_angle_deg.to_radians().cos();
+        let weight = |v: usize, u: usize| -> f64 {
+            match p.method {
+                Method::Icp => 1.0,
+                Method::Normals => {
+                    if normals[v].dot(&obs.normals[u]) >= cos_limit {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                }
+                Method::RhoC => rho_c[v],
+                Method::RhoP => obs.rho_p[u],
+                Method::Proposed => rho_c[v] * obs.rho_p[u],
+            }
+        };
+        // Model -> observed: each model vertex's nearest observed vertex.
+        let forward: Vec<(usize, f64)> = self.time("nearest model->observed", || {
+            posed
+                .par_iter()
+                .map(|q| obs_tree.nearest(q).map_or((0, f64::INFINITY), |x| x))
+                .collect()
+        });
+        // Observed -> model.
+        let model_tree = self.time("model tree", || NearestTree::new(&posed));
+        let backward: Vec<(usize, f64)> = self.time("nearest observed->model", || {
+            obs.vertices
+                .par_iter()
+                .map(|q| model_tree.nearest(q).map_or((0, f64::INFINITY), |x| x))
+                .collect()
+        });
+        let n = posed.len();
+        let mut w_sum = vec![0.0; n];
+        let mut target = vec![Vector3::zeros(); n];
+        let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
+        let mut add = |v: usize, u: usize, d2: f64| {
+            let w = weight(v, u);
+            if w < 0.5 {
+                downweighted += 1;
+            }
+            if w > 0.0 && d2.is_finite() {
+                w_sum[v] += w;
+                target[v] += w * obs.vertices[u];
+                weighted_sq += w * d2;
+                weight_sum += w;
+            }
+        };
+        for (v, &(u, d2)) in forward.iter().enumerate() {
+            add(v, u, d2);
+        }
+        for (u, &(v, d2)) in backward.iter().enumerate() {
+            add(v, u, d2);
+        }
+        let pulls = (0..n)
+            .filter(|&v| w_sum[v] > 0.0)
+            .map(|v| (v as u32, w_sum[v], target[v] / w_sum[v]))
+            .collect();
+        let r_c: f64 = rho_c.iter().sum();
+        let r_p: f64 = if p.method.uses_rho_p() {
+            obs.rho_p.iter().sum()
+        } else {
+            obs.vertices.len() as f64
+        };
+        Round {
+            targets: Targets { pulls },
+            weighted_sq,
+            weight_sum,
+            pairs: forward.len() + backward.len(),
+            downweighted,
+            normalizer: (r_c * r_p).max(1e-300),
+            contact_share: rho_c.iter().filter(|&&r| r < 0.5).count() as f64 / n.max(1) as f64,
+        }
+    }
+}
+
+/// Indices of `points` thinned to one per cube of side `spacing` (the point nearest the
+/// cube's centre; ties to the lower index), in increasing order; all of them for spacing 0.
+pub fn thin(points: &[Vector3<f64>], spacing: f64) -> Vec<usize> {
+    if spacing <= 0.0 {
+        return (0..points.len()).collect();
+    }
+    let mut best: std::collections::HashMap<[i64; 3], (usize, f64)> =
+        std::collections::HashMap::new();
+    for (i, p) in points.iter().enumerate() {
+        let c = p / spacing;
+        let cell = [c.x.floor() as i64, c.y.floor() as i64, c.z.floor() as i64];
+        let centre = Vector3::new(cell[0] as f64, cell[1] as f64, cell[2] as f64).add_scalar(0.5);
+        let d = (c - centre).norm_squared();
+        let e = best.entry(cell).or_insert((i, d));
+        if d < e.1 {
+            *e = (i, d);
+        }
+    }
+    let mut keep: Vec<usize> = best.into_values().map(|x| x.0).collect();
+    keep.sort_unstable();
+    keep
+}
+
+/// The largest displacement of any joint (head or tail) between two poses, metres.
+pub fn joint_motion(model: &BodyModel, a: &Pose, b: &Pose) -> f64 {
+    let ja = crate::skeleton::pose::joints(&model.skeleton, a);
+    let jb = crate::skeleton::pose::joints(&model.skeleton, b);
+    ja.iter()
+        .zip(&jb)
+        .map(|(x, y)| (x.0 - y.0).norm().max((x.1 - y.1).norm()))
+        .fold(0.0, f64::max)
+}

@@ -1,0 +1,266 @@
+//! Stage 6, robust articulated fitting ([`crate::fit`]), tracked from the reference frame.
+//!
+//! Artifacts per frame (in the stage folder): `NNNNNN.pose.csv` (the pose parameters, the
+//! poses.csv schema), `NNNNNN.joints.csv` (joint positions, the joints.csv schema),
+//! `NNNNNN.fit.csv` (diagnostics) and `NNNNNN.ply` (the posed model, coloured by part).
+//! After the stage, the output folder gets the whole run's `joints.csv`, `poses.csv` and
+//! `fit.csv`.
+
+use super::{load_observed, Context, Output};
+use crate::cache::KeyBuilder;
+use crate::dataset::frame_stem;
+use crate::error::{Error, Result};
+use crate::fit::{FitDiagnostics, FitResult, FitStatus, Fitter, Observation};
+use crate::joints::JointRow;
+use crate::skeleton::{Pose, Skeleton};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Header of the diagnostics CSV.
+pub const DIAGNOSTICS_HEADER: &str =
+    "frame,status,iterations,lm_steps,energy,rms_m,downweighted_share,contact_share,observed";
+
+/// The per-frame file names: (pose, joints, diagnostics, mesh).
+pub fn files(frame: u32) -> [String; 4] {
+    let s = frame_stem(frame);
+    [
+        format!("{s}.pose.csv"),
+        format!("{s}.joints.csv"),
+        format!("{s}.fit.csv"),
+        format!("{s}.ply"),
+    ]
+}
+
+pub(super) fn sources(_ctx: &Context, _frame: u32, _key: &mut KeyBuilder) -> Result<()> {
+    Ok(())
+}
+
+/// One diagnostics row (no header).
+pub fn diagnostics_row(frame: u32, d: &FitDiagnostics) -> String {
+    format!(
+        "{frame},{},{},{},{:e},{:.6},{:.4},{:.4},{}",
+        d.status.name(),
+        d.iterations,
+        d.lm_steps,
+        d.energy,
+        d.rms,
+        d.downweighted_share,
+        d.contact_share,
+        d.observed
+    )
+}
+
+/// Joint rows of `pose` at `frame`.
+pub fn joint_rows(skeleton: &Skeleton, frame: u32, pose: &Pose) -> Vec<JointRow> {
+    crate::skeleton::pose::joints(skeleton, pose)
+        .into_iter()
+        .zip(&skeleton.bones)
+        .map(|((head, tail), bone)| JointRow {
+            frame,
+            bone: bone.name.clone(),
+            head,
+            tail,
+        })
+        .collect()
+}
+
+/// A frame's observed surface as the fit reads it.
+pub fn observation(ctx: &Context, frame: u32) -> Result<Observation> {
+    let o = load_observed(ctx, frame)?;
+    Ok(Observation {
+        vertices: o.vertices.iter().map(|v| v.cast()).collect(),
+        normals: o.normals.iter().map(|v| v.cast()).collect(),
+        rho_p: o.rho_p.iter().map(|&v| v as f64).collect(),
+    })
+}
+
+/// Reads a cached frame's pose.
+fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
+    let path = ctx.cache.stage_dir("fit").join(&files(frame)[0]);
+    let poses = crate::poses::read(&path, skeleton)?;
+    poses
+        .into_iter()
+        .find(|p| p.0 == frame)
+        .map(|p| p.1)
+        .ok_or_else(|| Error::invalid(&path, format!("holds no pose for frame {frame}")))
+}
+
+/// Tracks `frames` (in computation order, t0 first, as [`crate::runner::Job::tracked_frames`]
+/// gives them) with `params`, in memory: the fit stage's computation without its cache
+/// (the ablation runs every method this way over one cached reconstruction).
+pub fn track(
+    ctx: &Context,
+    frames: &[u32],
+    params: &crate::fit::FitParams,
+    progress: &dyn Fn(u32),
+) -> Result<Vec<(u32, FitResult)>> {
+    let model = super::model::load(ctx)?;
+    let t0 = model.skeleton.reference_frame;
+    let fitter = Fitter::new(&model, params.clone());
+    let mut done: std::collections::HashMap<u32, Pose> = Default::default();
+    let mut out = Vec::with_capacity(frames.len());
+    for &frame in frames {
+        let obs = observation(ctx, frame)?;
+        let result = if frame == t0 {
+            fitter.reference(obs.vertices.len())
+        } else {
+            let previous = previous_frame(ctx, frame, t0);
+            let start = done
+                .get(&previous)
+                .cloned()
+                .unwrap_or_else(|| Pose::rest(model.skeleton.bones.len()));
+            fitter.fit(&obs, &start)
+        };
+        done.insert(frame, result.pose.clone());
+        out.push((frame, result));
+        progress(frame);
+    }
+    out.sort_by_key(|x| x.0);
+    Ok(out)
+}
+
+/// The neighbour of `frame` nearer to t0 in the sequence.
+fn previous_frame(ctx: &Context, frame: u32, t0: u32) -> u32 {
+    let frames = &ctx.sequence.frames;
+    let i = frames.iter().position(|&f| f == frame).unwrap_or(0);
+    if frame > t0 {
+        frames[i.saturating_sub(1)]
+    } else {
+        frames[(i + 1).min(frames.len() - 1)]
+    }
+}
+
+pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
+    let model = super::model::load(ctx)?;
+    let t0 = model.skeleton.reference_frame;
+    let obs = observation(ctx, frame)?;
+    let fitter = Fitter::new(&model, ctx.config.fit.clone());
+    let result: FitResult = if frame == t0 {
+        fitter.reference(obs.vertices.len())
+    } else {
+        let frames = &ctx.sequence.frames;
+        let i = frames.iter().position(|&f| f == frame).unwrap_or(0);
+        let previous = if frame > t0 {
+            frames[i - 1]
+        } else {
+            frames[i + 1]
+        };
+        let start = cached_pose(ctx, &model.skeleton, previous)?;
+        fitter.fit(&obs, &start)
+    };
+    write_frame(ctx, &model, frame, &result)
+}
+
+/// Writes a frame's artifacts.
+fn write_frame(
+    ctx: &Context,
+    model: &crate::skeleton::model::BodyModel,
+    frame: u32,
+    result: &FitResult,
+) -> Result<Output> {
+    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
+    let dir = ctx.cache.stage_dir("fit");
+    let names = files(frame);
+    let skeleton = &model.skeleton;
+    crate::poses::write(
+        &dir.join(&names[0]),
+        skeleton,
+        &[(frame, result.pose.clone())],
+    )?;
+    crate::joints::write(
+        &dir.join(&names[1]),
+        &joint_rows(skeleton, frame, &result.pose),
+    )?;
+    let diag = format!(
+        "{DIAGNOSTICS_HEADER}\n{}\n",
+        diagnostics_row(frame, &result.diagnostics)
+    );
+    crate::fsutil::write_atomic(&dir.join(&names[2]), diag.as_bytes())?;
+    let mesh = model.pose(&result.pose);
+    let colours: Vec<[u8; 3]> = model
+        .labels
+        .iter()
+        .map(|&l| super::model::part_colour(l))
+        .collect();
+    let normals = mesh.vertex_normals();
+    write_ply(
+        &dir.join(&names[3]),
+        &mesh,
+        &VertexAttributes {
+            normals: Some(&normals),
+            colors: Some(&colours),
+            scalars: Vec::new(),
+        },
+        PlyFormat::BinaryLittleEndian,
+    )?;
+    let mut warnings = Vec::new();
+    if result.diagnostics.status == FitStatus::NoObservation {
+        warnings.push(format!(
+            "fit: frame {frame} has too little observed surface ({} vertices); it keeps the previous pose",
+            result.diagnostics.observed
+        ));
+    }
+    Ok(Output {
+        files: names.to_vec(),
+        warnings,
+    })
+}
+
+/// Concatenates the frames' artifacts into the output folder: joints.csv, poses.csv and
+/// fit.csv, in frame order.
+pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<(Vec<PathBuf>, Vec<String>)> {
+    let mut frames = frames.to_vec();
+    frames.sort_unstable();
+    let dir = ctx.cache.stage_dir("fit");
+    let out = &ctx.config.output;
+    let mut joints = String::new();
+    let mut poses = String::new();
+    let mut diag = format!("{DIAGNOSTICS_HEADER}\n");
+    for &f in &frames {
+        let names = files(f);
+        let body = |name: &str| -> Result<String> {
+            let text = crate::fsutil::read_to_string(&dir.join(name))?;
+            Ok(text.split_once('\n').map_or("", |x| x.1).to_string())
+        };
+        joints += &body(&names[1])?;
+        poses += &body(&names[0])?;
+        diag += &body(&names[2])?;
+    }
+    let written = [
+        (
+            out.join("joints.csv"),
+            format!("{}\n{joints}", crate::joints::HEADER),
+        ),
+        (
+            out.join("poses.csv"),
+            format!("{}\n{poses}", crate::poses::HEADER),
+        ),
+        (out.join("fit.csv"), diag),
+    ];
+    for (path, text) in &written {
+        crate::fsutil::write_atomic(path, text.as_bytes())?;
+    }
+    Ok((written.into_iter().map(|x| x.0).collect(), Vec::new()))
+}
+
+/// Parses a diagnostics CSV (the per-frame file or fit.csv): (frame, status, rest).
+pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitStatus, String)>> {
+    let mut lines = text.lines();
+    if lines.next() != Some(DIAGNOSTICS_HEADER) {
+        return Err(Error::invalid(
+            path,
+            format!("the first line must be '{DIAGNOSTICS_HEADER}'"),
+        ));
+    }
+    let mut out = Vec::new();
+    for (i, line) in lines.enumerate() {
+        let mut parts = line.splitn(3, ',');
+        let bad = || Error::invalid(path, format!("line {}: not a diagnostics row", i + 2));
+        let frame: u32 = parts.next().and_then(|x| x.parse().ok()).ok_or_else(bad)?;
+        let status = parts.next().and_then(FitStatus::parse).ok_or_else(bad)?;
+        let mut rest = String::new();
+        let _ = write!(rest, "{}", parts.next().unwrap_or(""));
+        out.push((frame, status, rest));
+    }
+    Ok(out)
+}
