@@ -363,12 +363,33 @@ impl<'a> Fitter<'a> {
                 diagnostics,
             };
         }
-        let keep = thin(&obs.vertices, p.sample_spacing);
+        // Non-finite observations (a damaged cache, a hostile file) are dropped, never
+        // fitted: NaN must not reach a pose.
+        let finite: Vec<usize> = (0..obs.vertices.len())
+            .filter(|&i| {
+                obs.vertices[i]
+                    .iter()
+                    .chain(obs.normals[i].iter())
+                    .all(|v| v.is_finite())
+                    && obs.rho_p[i].is_finite()
+            })
+            .collect();
+        let points: Vec<Vector3<f64>> = finite.iter().map(|&i| obs.vertices[i]).collect();
+        let keep: Vec<usize> = thin(&points, p.sample_spacing)
+            .into_iter()
+            .map(|k| finite[k])
+            .collect();
         let obs = &Observation {
             vertices: keep.iter().map(|&i| obs.vertices[i]).collect(),
             normals: keep.iter().map(|&i| obs.normals[i]).collect(),
             rho_p: keep.iter().map(|&i| obs.rho_p[i]).collect(),
         };
+        if obs.vertices.is_empty() {
+            return FitResult {
+                pose: start.clone(),
+                diagnostics,
+            };
+        }
         let obs_tree = NearestTree::new(&obs.vertices);
         let mut pose = start.clone();
         let mut round = self.round(obs, &obs_tree, &pose);

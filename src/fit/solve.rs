@@ -150,7 +150,7 @@ pub fn levenberg_marquardt(
             report.energy_before = e0;
             report.energy_after = e0;
         }
-        if !(e0 > 0.0) || !e0.is_finite() {
+        if e0.is_nan() || e0 <= 0.0 || !e0.is_finite() {
             break;
         }
         let n = h.nrows();

@@ -248,8 +248,8 @@ mod tests {
             vertex_jacobian(&bones, v, w, &mut dense);
             sparse_vertex_jacobian(&bones, v, w, &mut blocks);
             let mut rebuilt = vec![Vector3::zeros(); 15];
-            for k in 0..3 {
-                rebuilt[k][k] = 1.0;
+            for (k, col) in rebuilt.iter_mut().take(3).enumerate() {
+                col[k] = 1.0;
             }
             for (b, cols) in &blocks {
                 for k in 0..3 {

@@ -69,8 +69,11 @@ pub struct StageDef {
     pub compute: fn(&Context, u32) -> Result<Output>,
     /// After the stage: writes sequence-level outputs from the frames' artifacts (the
     /// frames in computation order); returns the files and warnings.
-    pub finish: Option<fn(&Context, &[u32]) -> Result<(Vec<std::path::PathBuf>, Vec<String>)>>,
+    pub finish: Option<FinishFn>,
 }
+
+/// A stage's sequence-level step: (files written, warnings).
+pub type FinishFn = fn(&Context, &[u32]) -> Result<(Vec<std::path::PathBuf>, Vec<String>)>;
 
 /// What a stage wrote for one frame.
 #[derive(Debug, Default)]

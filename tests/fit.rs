@@ -1,0 +1,99 @@
+//! Stage 6 on exact observations: with the true surface observed, the fit recovers the
+//! true pose from the previous frame's; a frame without observation keeps the previous pose
+//! and is flagged; damaged observations never put NaN into a pose.
+
+use hullpose::fit::{FitParams, FitStatus, Fitter, Method, Observation};
+use hullpose::skeleton::{pose::joints, Pose, Skeleton};
+use hullpose::synth::{SceneKind, SynthOptions};
+use nalgebra::Vector3;
+use std::path::Path;
+
+/// The tripod's skeleton, true poses and true meshes (two small cameras: only the ground
+/// truth is used here).
+fn truth() -> (tempfile::TempDir, Skeleton, Vec<(u32, Pose)>) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut opts = SynthOptions::new(SceneKind::Tripod, dir.path());
+    opts.cameras = 2;
+    opts.width = 64;
+    opts.height = 48;
+    hullpose::synth::generate(&opts).unwrap();
+    let data = dir.path().join("data/tripod");
+    let skeleton = Skeleton::read(&data.join("skeleton.yaml")).unwrap();
+    let poses = hullpose::poses::read(&data.join("ground_truth/poses.csv"), &skeleton).unwrap();
+    (dir, skeleton, poses)
+}
+
+fn mesh(dir: &Path, frame: u32) -> hullpose::geometry::TriMesh {
+    hullpose::geometry::ply::read_ply(
+        &dir.join(format!("data/tripod/ground_truth/meshes/{frame:06}.ply")),
+    )
+    .unwrap()
+}
+
+fn observe(m: &hullpose::geometry::TriMesh) -> Observation {
+    Observation {
+        vertices: m.vertices.clone(),
+        normals: m.vertex_normals(),
+        rho_p: vec![0.9; m.vertices.len()],
+    }
+}
+
+/// Mean distance between the joints of two poses, metres.
+fn joint_error(s: &Skeleton, a: &Pose, b: &Pose) -> f64 {
+    let (ja, jb) = (joints(s, a), joints(s, b));
+    ja.iter()
+        .zip(&jb)
+        .map(|(x, y)| (x.0 - y.0).norm() + (x.1 - y.1).norm())
+        .sum::<f64>()
+        / (2 * ja.len()) as f64
+}
+
+#[test]
+fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
+    let (dir, skeleton, poses) = truth();
+    let model =
+        hullpose::stages::model::build(&skeleton, &mesh(dir.path(), 0), &Default::default())
+            .unwrap();
+    for method in [Method::Proposed, Method::Icp] {
+        let fitter = Fitter::new(
+            &model,
+            FitParams {
+                method,
+                ..Default::default()
+            },
+        );
+        // From the previous true pose to this frame's, over the motion's hardest frames.
+        for f in [5u32, 9, 13] {
+            let r = fitter.fit(&observe(&mesh(dir.path(), f)), &poses[f as usize - 1].1);
+            let e = joint_error(&skeleton, &r.pose, &poses[f as usize].1);
+            eprintln!("{method:?} t{f}: {:.2} mm, {:?}", e * 1000.0, r.diagnostics);
+            assert!(e < 0.004, "{method:?} t{f}: joint error {e} m");
+            assert_eq!(r.diagnostics.status, FitStatus::Converged);
+        }
+    }
+    let fitter = Fitter::new(&model, FitParams::default());
+    let previous = poses[4].1.clone();
+    // No observation (the subject out of view): the previous pose, flagged.
+    let r = fitter.fit(&Observation::default(), &previous);
+    assert_eq!(r.diagnostics.status, FitStatus::NoObservation);
+    assert_eq!(r.pose, previous);
+    // Too little observed surface (a sliver): the same.
+    let mut sliver = observe(&mesh(dir.path(), 5));
+    sliver.vertices.truncate(50);
+    sliver.normals.truncate(50);
+    sliver.rho_p.truncate(50);
+    assert_eq!(
+        fitter.fit(&sliver, &previous).diagnostics.status,
+        FitStatus::NoObservation
+    );
+    // NaN in the observation never reaches the pose.
+    let mut damaged = observe(&mesh(dir.path(), 5));
+    for i in (0..damaged.vertices.len()).step_by(7) {
+        damaged.vertices[i] = Vector3::repeat(f64::NAN);
+        damaged.rho_p[i + 1] = f64::NAN;
+    }
+    let r = fitter.fit(&damaged, &previous);
+    assert!(r.pose.is_finite());
+    assert!(r.diagnostics.energy.is_finite() && r.diagnostics.rms.is_finite());
+    assert!(joint_error(&skeleton, &r.pose, &poses[5].1) < 0.004);
+}

@@ -1,0 +1,148 @@
+//! The tripod at the paper's setting (15 cameras, 1024x768, 1 cm voxels, t0..t18), run
+//! once through the whole pipeline: stage 4 (ZNCC tells the true surface from phantom
+//! volume and bridges) and stage 6 (the robust fit and the baselines it is compared with).
+
+mod common;
+
+use common::*;
+use hullpose::stages::reliability::Observed;
+use hullpose::synth::{SceneKind, SynthOptions};
+use std::sync::OnceLock;
+
+/// The full tripod sequence, run through the fit and evaluated once for all tests here.
+fn run_tripod() -> &'static (tempfile::TempDir, String) {
+    static CELL: OnceLock<(tempfile::TempDir, String)> = OnceLock::new();
+    CELL.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        hullpose::synth::generate(&SynthOptions::new(SceneKind::Tripod, dir.path())).unwrap();
+        let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], dir.path());
+        assert!(ok, "{err}");
+        eprintln!("{out}");
+        let (ok, out, err) = run_cli(&["evaluate", "pipeline.yaml"], dir.path());
+        assert!(ok, "{err}");
+        eprintln!("{out}");
+        (dir, out)
+    })
+}
+
+/// Mean joint error per frame (cm) of a joints CSV against the ground truth.
+fn errors_cm(d: &std::path::Path, rows: &[hullpose::joints::JointRow]) -> Vec<f64> {
+    let truth_path = d.join("data/tripod/ground_truth/joints.csv");
+    let truth = hullpose::joints::read(&truth_path).unwrap();
+    hullpose::eval::pose::joint_errors(&truth, rows, &truth_path)
+        .unwrap()
+        .into_iter()
+        .map(|x| x.1 * 100.0)
+        .collect()
+}
+
+#[test]
+fn zncc_separates_true_from_false_surface() {
+    let (dir, _) = run_tripod();
+    let d = dir.path();
+    let csv = std::fs::read_to_string(d.join("output/evaluation/reliability.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 19);
+    for r in rows
+        .iter()
+        .filter(|r| [6.0, 7.0, 8.0, 11.0, 12.0, 13.0].contains(&r[0]))
+    {
+        let (frame, false_vertices, auc, rho_false, rho_true) = (r[0], r[2], r[3], r[4], r[5]);
+        assert!(false_vertices > 1000.0, "t{frame}: phantom volume present");
+        assert!(auc >= 0.85, "t{frame}: ROC AUC {auc}");
+        assert!(
+            rho_false < 0.2,
+            "t{frame}: mean rho_p of false vertices {rho_false}"
+        );
+        assert!(
+            rho_true > 0.4,
+            "t{frame}: mean rho_p of true seen vertices {rho_true}"
+        );
+    }
+    // The artifacts: a PLY MeshLab reads (quality = ZNCC) and the compact form agree.
+    let ply = std::fs::read(d.join("cache/reliability/000008.ply")).unwrap();
+    let header = String::from_utf8_lossy(&ply[..ply.len().min(600)]).to_string();
+    for prop in ["quality", "zncc", "rho_p", "cameras", "red"] {
+        assert!(header.contains(&format!(" {prop}\n")), "{prop} in {header}");
+    }
+    let path = d.join("cache/reliability/000008.obs");
+    let obs = Observed::parse(&path, &std::fs::read(&path).unwrap()).unwrap();
+    let mesh = hullpose::geometry::ply::read_ply(&d.join("cache/graphcut/000008.ply")).unwrap();
+    assert_eq!(obs.vertices.len(), mesh.vertices.len());
+    assert!(obs.zncc.iter().all(|z| (-1.0..=1.0).contains(z)));
+    assert!(obs
+        .zncc
+        .iter()
+        .zip(&obs.cameras)
+        .all(|(&z, &c)| c >= 2 || z == -1.0));
+    assert!(obs
+        .rho_p
+        .iter()
+        .all(|r| r.is_finite() && *r > 0.0 && *r < 1.0));
+}
+
+/// The fit at the paper's setting: the proposed method against the truth, and the baselines
+/// where the scene makes them fail.
+#[test]
+fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
+    let (dir, _) = run_tripod();
+    let d = dir.path();
+    // The run's outputs: joints for every frame and bone, finite; a converged fit per frame.
+    let rows = hullpose::joints::read(&d.join("output/joints.csv")).unwrap();
+    assert_eq!(rows.len(), 19 * 6);
+    assert!(rows
+        .iter()
+        .all(|r| r.head.iter().chain(r.tail.iter()).all(|v| v.is_finite())));
+    let diag_path = d.join("output/fit.csv");
+    let diag = hullpose::stages::fit::parse_diagnostics(
+        &diag_path,
+        &std::fs::read_to_string(&diag_path).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(diag.len(), 19);
+    assert!(diag[1..]
+        .iter()
+        .all(|x| x.1 == hullpose::fit::FitStatus::Converged));
+    assert!(d.join("cache/fit/000009.ply").is_file());
+    assert!(d.join("output/evaluation/joint_error.png").is_file());
+    let proposed = errors_cm(d, &rows);
+    eprintln!("proposed: {proposed:.2?}");
+    // The baselines over the same cached reconstruction.
+    let config = hullpose::config::Config::load(&d.join("pipeline.yaml")).unwrap();
+    let job = hullpose::runner::Job::load(config, None).unwrap();
+    let ctx = job.context();
+    let tracked = job.tracked_frames().unwrap();
+    let model = hullpose::stages::model::load(&ctx).unwrap();
+    let baseline = |method| {
+        let params = hullpose::fit::FitParams {
+            method,
+            ..Default::default()
+        };
+        let fits = hullpose::stages::fit::track(&ctx, &tracked, &params, &|_| {}).unwrap();
+        let rows: Vec<_> = fits
+            .iter()
+            .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
+            .collect();
+        errors_cm(d, &rows)
+    };
+    let icp = baseline(hullpose::fit::Method::Icp);
+    let rho_p = baseline(hullpose::fit::Method::RhoP);
+    eprintln!("icp: {icp:.2?}\nrho_p: {rho_p:.2?}");
+    let worst = |e: &[f64]| e.iter().copied().fold(0.0, f64::max);
+    // Within 1.25 cm on every frame (the paper reports about 1 cm; see the README).
+    assert!(
+        worst(&proposed) <= 1.25,
+        "proposed worst {}",
+        worst(&proposed)
+    );
+    // rho_p alone slips where the arms touch (t9-t10), the proposed method does not.
+    assert!(rho_p[9].max(rho_p[10]) > 3.0, "rho_p at contact {rho_p:?}");
+    // Plain ICP slips as the phantom volume forms (t4-t6, t13-t15), well beyond the proposed.
+    let icp_phantom = [4, 5, 6, 13, 14, 15].map(|f| icp[f]);
+    assert!(worst(&icp_phantom) > 2.5, "icp {icp:?}");
+    assert!(worst(&icp) > 2.0 * worst(&proposed));
+}
