@@ -275,3 +275,86 @@ pub fn reliability(
     }
     Ok(out)
 }
+
+/// Point i of n on a sphere of `radius` metres (a Fibonacci lattice): the same points as
+/// `tools/bench_fit.py` makes, so both sides query identical data.
+pub fn fibonacci_point(i: usize, n: usize, radius: f64) -> Vector3<f64> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+    let r = (1.0 - z * z).sqrt();
+    let a = golden * i as f64;
+    Vector3::new(r * a.cos(), r * a.sin(), z) * radius
+}
+
+/// Nearest-neighbour throughput: `points` on a 0.5 m sphere, `queries` on a 0.51 m sphere,
+/// one thread (as scipy's cKDTree.query with workers=1) and all threads.
+pub fn nearest(points: usize, queries: usize) -> String {
+    use crate::geometry::nearest::NearestTree;
+    use rayon::prelude::*;
+    let p: Vec<Vector3<f64>> = (0..points)
+        .map(|i| fibonacci_point(i, points, 0.5))
+        .collect();
+    let q: Vec<Vector3<f64>> = (0..queries)
+        .map(|i| fibonacci_point(i, queries, 0.51))
+        .collect();
+    let t = Instant::now();
+    let tree = NearestTree::new(&p);
+    let build = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let sum1: f64 = q.iter().map(|x| tree.nearest(x).map_or(0.0, |n| n.1)).sum();
+    let one = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let sum2: f64 = q
+        .par_iter()
+        .map(|x| tree.nearest(x).map_or(0.0, |n| n.1))
+        .sum();
+    let all = t.elapsed().as_secs_f64();
+    format!(
+        "kiddo nearest: {points} points, {queries} queries\n  build {:.1} ms\n  1 thread: {:.2} M queries/s\n  {} threads: {:.2} M queries/s\n  (mean squared distance {:.3e} / {:.3e} m^2)\n",
+        build * 1e3,
+        queries as f64 / one / 1e6,
+        rayon::current_num_threads(),
+        queries as f64 / all / 1e6,
+        sum1 / queries as f64,
+        sum2 / queries as f64
+    )
+}
+
+/// The fit's steps on one frame (needs the model and the frame's reliability in the cache):
+/// one tracked fit from t0's pose, with `spacing` (the fit's sample_spacing), reporting the
+/// vertex counts and the time per round of each step.
+pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
+    let ctx = job.context();
+    let model = crate::stages::model::load(&ctx)?;
+    let mut params = job.config.fit.clone();
+    if let Some(s) = spacing {
+        params.sample_spacing = s;
+    }
+    let obs = crate::stages::fit::observation(&ctx, frame)?;
+    let model_count = crate::fit::thin(&model.mesh.vertices, params.sample_spacing).len();
+    let obs_count = crate::fit::thin(&obs.vertices, params.sample_spacing).len();
+    let t = Instant::now();
+    let fitter = crate::fit::Fitter::new(&model, params.clone());
+    let setup = t.elapsed().as_secs_f64();
+    let start = crate::skeleton::Pose::rest(model.skeleton.bones.len());
+    let t = Instant::now();
+    let result = fitter.fit(&obs, &start);
+    let total = t.elapsed().as_secs_f64();
+    let rounds = result.diagnostics.iterations.max(1) as f64;
+    let mut out = format!(
+        "fit of frame {frame} from t0's pose, method {}: {model_count} model and {obs_count} observed vertices (sample_spacing {} m)\n  setup {:.1} ms, fit {:.3} s, {} rounds ({:?})\n  per round:\n",
+        params.method.name(),
+        params.sample_spacing,
+        setup * 1e3,
+        total,
+        result.diagnostics.iterations,
+        result.diagnostics.status
+    );
+    let mut sum = 0.0;
+    for (step, secs) in fitter.timings() {
+        sum += secs;
+        let _ = writeln!(out, "    {step:<26} {:8.2} ms", secs * 1e3 / rounds);
+    }
+    let _ = writeln!(out, "    {:<26} {:8.2} ms", "total", sum * 1e3 / rounds);
+    Ok(out)
+}

@@ -164,6 +164,23 @@ enum BenchWhat {
         #[arg(long, default_value_t = 200_000)]
         pairs: usize,
     },
+    /// The fit's steps on one frame (needs the model and the frame's reliability in the
+    /// cache): vertex counts and milliseconds per round of each step.
+    Fit {
+        file: PathBuf,
+        #[arg(long, default_value_t = 1)]
+        frame: u32,
+        /// Override fit.sample_spacing (metres; 0 keeps every vertex).
+        #[arg(long)]
+        spacing: Option<f64>,
+    },
+    /// k-d tree nearest-neighbour queries per second (compare tools/bench_fit.py).
+    Nearest {
+        #[arg(long, default_value_t = 100_000)]
+        points: usize,
+        #[arg(long, default_value_t = 1_000_000)]
+        queries: usize,
+    },
     /// Iso-surface extraction of a sphere on an N^3 grid.
     Meshing {
         #[arg(long, default_value_t = 256)]
@@ -303,6 +320,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "{}",
                     hullpose::bench::reliability(&job, frame, dump_patches.as_deref(), pairs)?
                 );
+            }
+            BenchWhat::Fit {
+                file,
+                frame,
+                spacing,
+            } => {
+                let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
+                print!("{}", hullpose::bench::fit(&job, frame, spacing)?);
+            }
+            BenchWhat::Nearest { points, queries } => {
+                print!("{}", hullpose::bench::nearest(points, queries))
             }
             BenchWhat::Maxflow { size } => print!("{}", hullpose::bench::maxflow_fixture(size)),
             BenchWhat::Meshing { size, repeat } => {

@@ -135,7 +135,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::Reference,
         about: "skin-bone body model from the reference frame's surface and the skeleton",
         inputs: &["graphcut"],
-        format_version: 1,
+        format_version: 2,
         params: |c| crate::yaml::to_string(&c.model).unwrap_or_default(),
         sources: model::sources,
         compute: model::compute,
