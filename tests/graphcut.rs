@@ -12,7 +12,17 @@ use std::path::Path;
 
 /// (frame, stage, accuracy, completeness) rows of `pipeline evaluate`.
 fn evaluate(dir: &Path, frames: &str) -> Vec<(u32, String, f64, f64)> {
-    let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--frames", frames], dir);
+    let (ok, _, err) = run_cli(
+        &[
+            "run",
+            "pipeline.yaml",
+            "--frames",
+            frames,
+            "--until",
+            "graphcut",
+        ],
+        dir,
+    );
     assert!(ok, "{err}");
     let (ok, out, err) = run_cli(&["evaluate", "pipeline.yaml", "--frames", frames], dir);
     assert!(ok, "{err}");
