@@ -247,6 +247,17 @@ impl Sequence {
             .unwrap_or_default()
     }
 
+    /// The frame a tracked frame `f` starts from: its neighbour nearer to t0 (none for t0
+    /// or a frame outside the sequence).
+    pub fn tracked_previous(&self, f: u32, t0: u32) -> Option<u32> {
+        let i = self.frames.iter().position(|&x| x == f)?;
+        match f.cmp(&t0) {
+            std::cmp::Ordering::Equal => None,
+            std::cmp::Ordering::Greater => i.checked_sub(1).map(|j| self.frames[j]),
+            std::cmp::Ordering::Less => self.frames.get(i + 1).copied(),
+        }
+    }
+
     /// Path of camera `cam`'s frame `frame`.
     pub fn frame_path(&self, cam: usize, frame: u32) -> PathBuf {
         self.dir

@@ -169,17 +169,6 @@ impl Job {
         Ok(self.stage_frames(stages::find("fit")?, reference))
     }
 
-    /// The frame a tracked stage's frame `f` starts from: its neighbour nearer to t0.
-    pub fn tracked_previous(&self, f: u32, t0: u32) -> Option<u32> {
-        let frames = &self.sequence.frames;
-        let i = frames.iter().position(|&x| x == f)?;
-        match f.cmp(&t0) {
-            std::cmp::Ordering::Equal => None,
-            std::cmp::Ordering::Greater => i.checked_sub(1).map(|j| frames[j]),
-            std::cmp::Ordering::Less => frames.get(i + 1).copied(),
-        }
-    }
-
     /// Cache keys of every stage for every frame it makes artifacts for. A frame's key
     /// covers the stage, its format and parameters, its upstream artifacts' keys (a
     /// reference stage's at t0), its raw inputs, and for a tracked stage the key of the
@@ -216,7 +205,9 @@ impl Job {
             if stage.scope == Scope::Tracked {
                 for &f in &frames {
                     let mut key = key_of(f, &keys)?;
-                    if let Some(prev) = reference.and_then(|t0| self.tracked_previous(f, t0)) {
+                    if let Some(prev) =
+                        reference.and_then(|t0| self.sequence.tracked_previous(f, t0))
+                    {
                         let mut k = KeyBuilder::new();
                         k.add("own", &key)
                             .add("previous", &keys[&(stage.name, prev)]);

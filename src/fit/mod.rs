@@ -233,6 +233,22 @@ pub struct FitDiagnostics {
     pub observed: usize,
 }
 
+impl FitDiagnostics {
+    /// A frame not (yet) fitted: no rounds, zero energy.
+    pub fn unfitted(status: FitStatus, observed: usize) -> FitDiagnostics {
+        FitDiagnostics {
+            status,
+            iterations: 0,
+            lm_steps: 0,
+            energy: 0.0,
+            rms: 0.0,
+            downweighted_share: 0.0,
+            contact_share: 0.0,
+            observed,
+        }
+    }
+}
+
 /// A fitted frame.
 #[derive(Debug, Clone)]
 pub struct FitResult {
@@ -328,16 +344,7 @@ impl<'a> Fitter<'a> {
     pub fn reference(&self, observed: usize) -> FitResult {
         FitResult {
             pose: Pose::rest(self.model.skeleton.bones.len()),
-            diagnostics: FitDiagnostics {
-                status: FitStatus::Reference,
-                iterations: 0,
-                lm_steps: 0,
-                energy: 0.0,
-                rms: 0.0,
-                downweighted_share: 0.0,
-                contact_share: 0.0,
-                observed,
-            },
+            diagnostics: FitDiagnostics::unfitted(FitStatus::Reference, observed),
         }
     }
 
@@ -345,16 +352,8 @@ impl<'a> Fitter<'a> {
     pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
         let p = &self.params;
         let model_vertices = self.model.mesh.vertices.len();
-        let mut diagnostics = FitDiagnostics {
-            status: FitStatus::NoObservation,
-            iterations: 0,
-            lm_steps: 0,
-            energy: 0.0,
-            rms: 0.0,
-            downweighted_share: 0.0,
-            contact_share: 0.0,
-            observed: obs.vertices.len(),
-        };
+        let mut diagnostics =
+            FitDiagnostics::unfitted(FitStatus::NoObservation, obs.vertices.len());
         if obs.vertices.is_empty()
             || (obs.vertices.len() as f64) < p.min_observed_share * model_vertices as f64
         {

@@ -13,7 +13,6 @@ use crate::error::{Error, Result};
 use crate::fit::{FitDiagnostics, FitResult, FitStatus, Fitter, Observation};
 use crate::joints::JointRow;
 use crate::skeleton::{Pose, Skeleton};
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Header of the diagnostics CSV.
@@ -104,9 +103,10 @@ pub fn track(
         let result = if frame == t0 {
             fitter.reference(obs.vertices.len())
         } else {
-            let previous = previous_frame(ctx, frame, t0);
-            let start = done
-                .get(&previous)
+            let start = ctx
+                .sequence
+                .tracked_previous(frame, t0)
+                .and_then(|f| done.get(&f))
                 .cloned()
                 .unwrap_or_else(|| Pose::rest(model.skeleton.bones.len()));
             fitter.fit(&obs, &start)
@@ -117,17 +117,6 @@ pub fn track(
     }
     out.sort_by_key(|x| x.0);
     Ok(out)
-}
-
-/// The neighbour of `frame` nearer to t0 in the sequence.
-fn previous_frame(ctx: &Context, frame: u32, t0: u32) -> u32 {
-    let frames = &ctx.sequence.frames;
-    let i = frames.iter().position(|&f| f == frame).unwrap_or(0);
-    if frame > t0 {
-        frames[i.saturating_sub(1)]
-    } else {
-        frames[(i + 1).min(frames.len() - 1)]
-    }
 }
 
 pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
@@ -258,9 +247,7 @@ pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitStatus,
         let bad = || Error::invalid(path, format!("line {}: not a diagnostics row", i + 2));
         let frame: u32 = parts.next().and_then(|x| x.parse().ok()).ok_or_else(bad)?;
         let status = parts.next().and_then(FitStatus::parse).ok_or_else(bad)?;
-        let mut rest = String::new();
-        let _ = write!(rest, "{}", parts.next().unwrap_or(""));
-        out.push((frame, status, rest));
+        out.push((frame, status, parts.next().unwrap_or("").to_string()));
     }
     Ok(out)
 }
