@@ -400,7 +400,7 @@ pub fn cameras_to_yaml(cameras: &[Camera]) -> String {
     let mut s = String::from("cameras:\n");
     for c in cameras {
         let r = |i: usize| row([c.r[(i, 0)], c.r[(i, 1)], c.r[(i, 2)]]);
-        let _ = writeln!(s, "  - name: {}", c.name);
+        let _ = writeln!(s, "  - name: {:?}", c.name);
         let _ = writeln!(s, "    width: {}", c.width);
         let _ = writeln!(s, "    height: {}", c.height);
         let _ = writeln!(

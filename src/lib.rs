@@ -6,6 +6,7 @@
 
 pub mod bench;
 pub mod cache;
+pub mod calib_import;
 pub mod camera;
 pub mod config;
 pub mod dataset;

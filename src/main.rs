@@ -119,11 +119,36 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Convert another tool's calibration to calib/cameras.yaml: OpenCV FileStorage
+    /// (`--from opencv INTRI EXTRI`, e.g. intri.yml extri.yml) or a COLMAP text model
+    /// (`--from colmap DIR` holding cameras.txt and images.txt).
+    ImportCalib {
+        /// The source format.
+        #[arg(long, value_enum)]
+        from: CalibSource,
+        /// opencv: INTRI EXTRI; colmap: DIR.
+        #[arg(required = true, num_args = 1..=2)]
+        paths: Vec<PathBuf>,
+        /// Where to write cameras.yaml.
+        #[arg(long, default_value = "calib/cameras.yaml")]
+        out: PathBuf,
+        /// Image size WIDTHxHEIGHT for OpenCV cameras without W_<name> / H_<name>.
+        #[arg(long, value_parser = hullpose::calib_import::parse_size)]
+        size: Option<(u32, u32)>,
+    },
     /// Check a capture against its calibration and report what it holds.
     Check {
         /// The pipeline.yaml naming the calibration and the sequence.
         file: PathBuf,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CalibSource {
+    /// OpenCV FileStorage YAML: intri.yml and extri.yml.
+    Opencv,
+    /// COLMAP text model: a folder with cameras.txt and images.txt.
+    Colmap,
 }
 
 #[derive(Subcommand)]
@@ -389,6 +414,38 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 s.seconds
             );
             println!("run it with: pipeline run {}", s.pipeline_yaml.display());
+        }
+        Command::ImportCalib {
+            from,
+            paths,
+            out,
+            size,
+        } => {
+            let imported = match (from, paths.as_slice()) {
+                (CalibSource::Opencv, [intri, extri]) => {
+                    hullpose::calib_import::from_opencv(intri, extri, size)?
+                }
+                (CalibSource::Colmap, [dir]) => hullpose::calib_import::from_colmap(dir)?,
+                (CalibSource::Opencv, _) => {
+                    anyhow::bail!(
+                        "--from opencv takes two files: INTRI EXTRI (intri.yml extri.yml)"
+                    )
+                }
+                (CalibSource::Colmap, _) => {
+                    anyhow::bail!(
+                        "--from colmap takes one folder holding cameras.txt and images.txt"
+                    )
+                }
+            };
+            for w in &imported.warnings {
+                eprintln!("warning: {w}");
+            }
+            hullpose::camera::write_cameras(&out, &imported.cameras)?;
+            println!(
+                "wrote {} cameras to {}",
+                imported.cameras.len(),
+                out.display()
+            );
         }
         Command::Check { file } => {
             let config = Config::load(&file)?;
