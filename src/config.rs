@@ -2,6 +2,7 @@
 //! file. Unknown keys and wrong types are errors naming the key and the line.
 
 use crate::error::{Error, Result};
+use crate::export::ExportParams;
 use crate::fit::FitParams;
 use crate::stages::graphcut::{self, GraphcutParams};
 use crate::stages::model::{self, ModelParams};
@@ -68,6 +69,8 @@ struct PipelineFile {
     model: ModelParams,
     #[serde(default)]
     fit: FitParams,
+    #[serde(default)]
+    export: ExportParams,
 }
 
 fn default_cache() -> PathBuf {
@@ -105,6 +108,8 @@ pub struct Config {
     pub model: ModelParams,
     /// Stage 6 parameters.
     pub fit: FitParams,
+    /// Export parameters.
+    pub export: ExportParams,
 }
 
 impl Config {
@@ -135,11 +140,13 @@ impl Config {
                 ..file.model
             },
             fit: file.fit,
+            export: file.export,
         };
         graphcut::validate(&config.graphcut).map_err(|m| Error::invalid(path, m))?;
         reliability::validate(&config.reliability).map_err(|m| Error::invalid(path, m))?;
         model::validate(&config.model).map_err(|m| Error::invalid(path, m))?;
         crate::fit::validate(&config.fit).map_err(|m| Error::invalid(path, m))?;
+        crate::export::validate(&config.export).map_err(|m| Error::invalid(path, m))?;
         if let Some(mesh) = config.model.mesh.as_ref().filter(|m| !m.is_file()) {
             return Err(Error::invalid(
                 path,

@@ -12,6 +12,7 @@ pub mod config;
 pub mod dataset;
 pub mod error;
 pub mod eval;
+pub mod export;
 pub mod fit;
 pub mod fsutil;
 pub mod geometry;

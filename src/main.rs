@@ -96,6 +96,19 @@ enum Command {
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
     },
+    /// Write exports from the cache without recomputing anything: glb (skinned model and
+    /// motion), bvh (motion), ply / obj (every reconstruction's meshes), overlay (skeleton on
+    /// the frames, contact sheets). Under <output>/export/.
+    Export {
+        /// The pipeline.yaml.
+        file: PathBuf,
+        /// Formats to write (repeat or comma-separate; default: export.formats).
+        #[arg(long, value_enum, value_delimiter = ',')]
+        format: Vec<hullpose::export::Format>,
+        /// Frames, A..B inclusive (overrides pipeline.yaml).
+        #[arg(long, value_name = "A..B", value_parser = parse_range)]
+        frames: Option<FrameRange>,
+    },
     /// Time the inner steps of a stage (benchmarks; nothing is written).
     Bench {
         #[command(subcommand)]
@@ -267,6 +280,36 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 start.elapsed().as_secs_f64(),
                 job.cache.root.display(),
                 job.config.output.display()
+            );
+        }
+        Command::Export {
+            file,
+            format,
+            frames,
+        } => {
+            let start = std::time::Instant::now();
+            let job = Job::load(Config::load(&file)?, frames)?;
+            let formats = if format.is_empty() {
+                job.config.export.formats.clone()
+            } else {
+                format
+            };
+            let mut stages = vec!["visual_hull", "graphcut"];
+            if job.sequence.skeleton()?.is_some() {
+                stages.extend(["model", "fit"]);
+            }
+            job.require_cached(&stages)?;
+            let written = hullpose::export::run(&job.context(), &job.frames, &formats)?;
+            for w in &written.warnings {
+                eprintln!("warning: {w}");
+            }
+            for o in &written.outputs {
+                println!("wrote {}", o.display());
+            }
+            println!(
+                "done: {} files from the cache in {:.1} s",
+                written.files,
+                start.elapsed().as_secs_f64()
             );
         }
         Command::Ablation { file, frames } => {

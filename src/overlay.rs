@@ -2,10 +2,13 @@
 //! beside the frame it explains.
 
 use crate::camera::Camera;
+use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
 use crate::runner::Job;
 use image::{GrayImage, Rgb, RgbImage};
+use nalgebra::{Vector2, Vector3};
+use std::path::Path;
 
 /// The frame with the silhouette's outline in green (left) beside `mesh` rendered through
 /// `cam` with grey Lambert shading lit from the camera, silhouette pixels the mesh misses
@@ -22,19 +25,12 @@ pub fn mesh_beside_frame(
     let normals = mesh.vertex_normals();
     let centre = cam.centre();
     let mut out = RgbImage::new(2 * w, h);
-    let fg = |x: i64, y: i64| {
-        x >= 0
-            && y >= 0
-            && x < w as i64
-            && y < h as i64
-            && mask.get_pixel(x as u32, y as u32).0[0] >= 128
-    };
+    let fg = |x: i64, y: i64| foreground(mask, x, y);
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
             let (xi, yi) = (x as i64, y as i64);
-            let edge = fg(xi, yi)
-                && !(fg(xi - 1, yi) && fg(xi + 1, yi) && fg(xi, yi - 1) && fg(xi, yi + 1));
+            let edge = silhouette_edge(mask, xi, yi);
             out.put_pixel(
                 x,
                 y,
@@ -66,6 +62,135 @@ pub fn mesh_beside_frame(
     out
 }
 
+/// Whether pixel (x, y) of `mask` is foreground (outside the image: no).
+fn foreground(mask: &GrayImage, x: i64, y: i64) -> bool {
+    x >= 0
+        && y >= 0
+        && x < mask.width() as i64
+        && y < mask.height() as i64
+        && mask.get_pixel(x as u32, y as u32).0[0] >= 128
+}
+
+/// Whether pixel (x, y) is on the silhouette's outline: foreground with a 4-neighbour that
+/// is not.
+pub fn silhouette_edge(mask: &GrayImage, x: i64, y: i64) -> bool {
+    let fg = |x, y| foreground(mask, x, y);
+    fg(x, y) && !(fg(x - 1, y) && fg(x + 1, y) && fg(x, y - 1) && fg(x, y + 1))
+}
+
+/// Paints a disc of `radius` pixels centred at `p`.
+fn disc(img: &mut RgbImage, p: Vector2<f64>, radius: f64, colour: [u8; 3]) {
+    let r = radius.ceil() as i64;
+    let (cx, cy) = (p.x.round() as i64, p.y.round() as i64);
+    for y in cy - r..=cy + r {
+        for x in cx - r..=cx + r {
+            let inside = ((x - cx).pow(2) + (y - cy).pow(2)) as f64 <= radius * radius;
+            if inside && x >= 0 && y >= 0 && x < img.width() as i64 && y < img.height() as i64 {
+                img.put_pixel(x as u32, y as u32, Rgb(colour));
+            }
+        }
+    }
+}
+
+/// Paints a segment of half-width `radius` from a to b.
+fn segment(img: &mut RgbImage, a: Vector2<f64>, b: Vector2<f64>, radius: f64, colour: [u8; 3]) {
+    let steps = ((b - a).norm().ceil() as usize).clamp(1, 100_000);
+    for k in 0..=steps {
+        disc(img, a + (b - a) * (k as f64 / steps as f64), radius, colour);
+    }
+}
+
+/// The frame seen by `cam` with the silhouette's outline in green and the skeleton's bones
+/// (`joints`: posed (head, tail) per bone, world metres) projected on it, each bone in its
+/// part's colour over a black rim, joints as white dots. Bones behind the camera are left
+/// out.
+pub fn skeleton_on_frame(
+    cam: &Camera,
+    frame: &RgbImage,
+    mask: &GrayImage,
+    joints: &[(Vector3<f64>, Vector3<f64>)],
+) -> RgbImage {
+    let mut out = frame.clone();
+    for y in 0..out.height() {
+        for x in 0..out.width() {
+            if silhouette_edge(mask, x as i64, y as i64) {
+                out.put_pixel(x, y, Rgb([0, 255, 0]));
+            }
+        }
+    }
+    // Line half-width: about 1/300 of the image's width, at least one pixel.
+    let r = (cam.width as f64 / 300.0).max(1.0);
+    let projected: Vec<Option<(Vector2<f64>, Vector2<f64>)>> = joints
+        .iter()
+        .map(|(h, t)| Some((cam.project(h)?, cam.project(t)?)))
+        .collect();
+    for (b, p) in projected.iter().enumerate() {
+        if let Some((h, t)) = p {
+            segment(&mut out, *h, *t, r + 1.0, [0, 0, 0]);
+            segment(&mut out, *h, *t, r, crate::stages::model::part_colour(b));
+        }
+    }
+    for (h, t) in projected.iter().flatten() {
+        for p in [h, t] {
+            disc(&mut out, *p, r + 2.0, [0, 0, 0]);
+            disc(&mut out, *p, r + 1.0, [255, 255, 255]);
+        }
+    }
+    out
+}
+
+/// The index of the camera named `name` in the sequence's calibration (read from
+/// `calibration`, named in the error).
+pub fn camera_index(seq: &Sequence, calibration: &Path, name: &str) -> Result<usize> {
+    seq.cameras
+        .iter()
+        .position(|c| c.name == name)
+        .ok_or_else(|| {
+            Error::Usage(format!(
+                "no camera named '{name}' in {}",
+                calibration.display()
+            ))
+        })
+}
+
+/// Tiles `images` (with their `labels`) into one picture, `columns` per row, each scaled to
+/// `tile_width` pixels wide.
+pub fn contact_sheet(images: &[RgbImage], labels: &[String], tile_width: u32) -> RgbImage {
+    let n = images.len().max(1);
+    let columns = (n as f64).sqrt().ceil() as u32;
+    let rows = (n as u32).div_ceil(columns);
+    let (w0, h0) = images.first().map_or((1, 1), |i| (i.width(), i.height()));
+    let tile_height = ((h0 as f64 * tile_width as f64 / w0 as f64).round() as u32).max(1);
+    let gap = 4;
+    let mut sheet = RgbImage::from_pixel(
+        columns * (tile_width + gap) + gap,
+        rows * (tile_height + gap) + gap,
+        Rgb([32, 32, 32]),
+    );
+    for (i, (img, label)) in images.iter().zip(labels).enumerate() {
+        let tile = image::imageops::resize(
+            img,
+            tile_width,
+            tile_height,
+            image::imageops::FilterType::Triangle,
+        );
+        let (col, row) = (i as u32 % columns, i as u32 / columns);
+        let (x, y) = (
+            gap + col * (tile_width + gap),
+            gap + row * (tile_height + gap),
+        );
+        image::imageops::replace(&mut sheet, &tile, x as i64, y as i64);
+        crate::plot::text(
+            &mut sheet,
+            x as i64 + 4,
+            y as i64 + 4,
+            label,
+            [255, 255, 255],
+        );
+    }
+    sheet
+}
+
 /// [`mesh_beside_frame`] for a job's cached reconstruction (`stage`: visual_hull or graphcut)
 /// of `frame`, through the camera named `camera` (the first camera when `None`).
 pub fn hull_beside_frame(
@@ -82,16 +207,7 @@ pub fn hull_beside_frame(
     let seq = &job.sequence;
     let c = match camera {
         None => 0,
-        Some(name) => seq
-            .cameras
-            .iter()
-            .position(|c| c.name == name)
-            .ok_or_else(|| {
-                Error::Usage(format!(
-                    "no camera named '{name}' in {}",
-                    job.config.calibration.display()
-                ))
-            })?,
+        Some(name) => camera_index(seq, &job.config.calibration, name)?,
     };
     let ctx = crate::stages::Context::new(&job.config, seq, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;

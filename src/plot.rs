@@ -111,7 +111,7 @@ fn put(img: &mut RgbImage, x: i64, y: i64, c: [u8; 3]) {
 }
 
 /// Text with its top-left corner at (x, y); `SCALE` pixels per font pixel.
-fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, c: [u8; 3]) {
+pub(crate) fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, c: [u8; 3]) {
     for (i, ch) in s.chars().enumerate() {
         let g = glyph(ch).unwrap_or_else(|| glyph('_').expect("glyph"));
         for (r, row) in g.iter().enumerate() {

@@ -127,7 +127,7 @@ impl Job {
     fn stage_frames(&self, stage: &StageDef, reference: Option<u32>) -> Vec<u32> {
         let Some(t0) = reference else {
             return match stage.scope {
-                Scope::PerFrame => self.frames.clone(),
+                Scope::PerFrame | Scope::Sequence => self.frames.clone(),
                 _ => Vec::new(),
             };
         };
@@ -152,6 +152,7 @@ impl Job {
         match stage.scope {
             Scope::Reference => vec![t0],
             Scope::Tracked => tracked(),
+            Scope::Sequence => self.frames.clone(),
             Scope::PerFrame => {
                 let mut frames = self.frames.clone();
                 frames.extend(tracked());
@@ -169,6 +170,37 @@ impl Job {
         Ok(self.stage_frames(stages::find("fit")?, reference))
     }
 
+    /// Checks that the cache holds up-to-date artifacts of `stages` for the selected frames
+    /// (a reference stage: t0), as re-exports need; the error says what to run.
+    pub fn require_cached(&self, stages: &[&str]) -> Result<()> {
+        let reference = self.reference_frame()?;
+        let keys = self.keys(reference)?;
+        for name in stages {
+            let stage = stages::find(name)?;
+            let frames = match stage.scope {
+                Scope::Reference => reference.into_iter().collect(),
+                Scope::Tracked if reference.is_none() => Vec::new(),
+                _ => self.frames.clone(),
+            };
+            for f in frames {
+                let state = self.cache.state(stage.name, f, &keys[&(stage.name, f)]);
+                if state != ArtifactState::UpToDate {
+                    let what = if state == ArtifactState::Stale {
+                        "is stale"
+                    } else {
+                        "is missing"
+                    };
+                    return Err(Error::Usage(format!(
+                        "the cached {} result of frame {f} {what}; run `pipeline run {}` first",
+                        stage.name,
+                        self.config.path.display()
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Cache keys of every stage for every frame it makes artifacts for. A frame's key
     /// covers the stage, its format and parameters, its upstream artifacts' keys (a
     /// reference stage's at t0), its raw inputs, and for a tracked stage the key of the
@@ -176,7 +208,7 @@ impl Job {
     fn keys(&self, reference: Option<u32>) -> Result<HashMap<(&'static str, u32), String>> {
         let ctx = self.context();
         let mut keys: HashMap<(&'static str, u32), String> = HashMap::new();
-        for stage in STAGES {
+        for stage in STAGES.iter().filter(|s| s.scope != Scope::Sequence) {
             let params = (stage.params)(&self.config);
             let frames = self.stage_frames(stage, reference);
             let key_of = |f: u32, keys: &HashMap<(&'static str, u32), String>| -> Result<String> {
@@ -292,6 +324,22 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     for (stage, forced) in plan {
         let start = Instant::now();
         let frames = job.stage_frames(stage, reference);
+        if stage.scope == Scope::Sequence {
+            let finished = match stage.finish {
+                Some(finish) => finish(&ctx, &frames)?,
+                None => Default::default(),
+            };
+            reports.push(StageReport {
+                stage: stage.name,
+                computed: finished.files,
+                reused: 0,
+                seconds: start.elapsed().as_secs_f64(),
+                location: job.config.output.clone(),
+                warnings: finished.warnings,
+                outputs: finished.outputs,
+            });
+            continue;
+        }
         if stage.scope != Scope::PerFrame && frames.is_empty() {
             reports.push(StageReport {
                 stage: stage.name,
@@ -340,9 +388,9 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
         progress.finish_and_clear();
         let mut outputs = Vec::new();
         if let Some(finish) = stage.finish {
-            let (files, w) = finish(&ctx, &frames)?;
-            outputs = files;
-            warnings.push(w);
+            let finished = finish(&ctx, &frames)?;
+            outputs = finished.outputs;
+            warnings.push(finished.warnings);
         }
         reports.push(StageReport {
             stage: stage.name,
@@ -363,6 +411,7 @@ pub fn status(job: &Job) -> Result<Vec<StageStatus>> {
     let keys = job.keys(reference)?;
     Ok(STAGES
         .iter()
+        .filter(|s| s.scope != Scope::Sequence)
         .map(|s| {
             let mut st = StageStatus {
                 stage: s.name,

@@ -1,4 +1,6 @@
-//! Wavefront OBJ: writing (positions, optional normals, triangles) and reading (with tobj).
+//! Wavefront OBJ: writing (positions, optional normals and vertex colours, triangles) and
+//! reading (with tobj). Vertex colours use the common `v x y z r g b` extension (r, g, b in
+//! 0..1) that MeshLab and Blender read.
 
 use super::mesh::TriMesh;
 use crate::error::{Error, Result};
@@ -6,11 +8,12 @@ use nalgebra::Vector3;
 use std::io::Write;
 use std::path::Path;
 
-/// Writes `mesh` (with `normals` if given) as OBJ text.
+/// Writes `mesh` (with `normals` and `colours` if given) as OBJ text.
 pub fn write_obj_to(
     w: &mut dyn Write,
     mesh: &TriMesh,
     normals: Option<&[Vector3<f64>]>,
+    colours: Option<&[[u8; 3]]>,
 ) -> std::io::Result<()> {
     writeln!(
         w,
@@ -18,8 +21,18 @@ pub fn write_obj_to(
         mesh.vertices.len(),
         mesh.triangles.len()
     )?;
-    for v in &mesh.vertices {
-        writeln!(w, "v {} {} {}", v.x as f32, v.y as f32, v.z as f32)?;
+    for (i, v) in mesh.vertices.iter().enumerate() {
+        match colours.and_then(|c| c.get(i)) {
+            Some(c) => {
+                let [r, g, b] = c.map(|x| x as f32 / 255.0);
+                writeln!(
+                    w,
+                    "v {} {} {} {r:.4} {g:.4} {b:.4}",
+                    v.x as f32, v.y as f32, v.z as f32
+                )?
+            }
+            None => writeln!(w, "v {} {} {}", v.x as f32, v.y as f32, v.z as f32)?,
+        }
     }
     if let Some(ns) = normals {
         for n in ns {
@@ -38,8 +51,13 @@ pub fn write_obj_to(
 }
 
 /// Writes an OBJ file atomically.
-pub fn write_obj(path: &Path, mesh: &TriMesh, normals: Option<&[Vector3<f64>]>) -> Result<()> {
-    crate::fsutil::write_atomic_with(path, |w| write_obj_to(w, mesh, normals))
+pub fn write_obj(
+    path: &Path,
+    mesh: &TriMesh,
+    normals: Option<&[Vector3<f64>]>,
+    colours: Option<&[[u8; 3]]>,
+) -> Result<()> {
+    crate::fsutil::write_atomic_with(path, |w| write_obj_to(w, mesh, normals, colours))
 }
 
 /// Reads an OBJ file's geometry (every object, polygons triangulated) as one mesh.
@@ -93,7 +111,7 @@ mod tests {
         };
         let normals = mesh.vertex_normals();
         let mut buf = Vec::new();
-        write_obj_to(&mut buf, &mesh, Some(&normals)).unwrap();
+        write_obj_to(&mut buf, &mesh, Some(&normals), None).unwrap();
         let text = String::from_utf8(buf).unwrap();
         assert_eq!(text.lines().filter(|l| l.starts_with("v ")).count(), 3);
         assert_eq!(text.lines().filter(|l| l.starts_with("vn ")).count(), 3);

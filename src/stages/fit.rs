@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::fit::{FitDiagnostics, FitResult, FitStatus, Fitter, Observation};
 use crate::joints::JointRow;
 use crate::skeleton::{Pose, Skeleton};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Header of the diagnostics CSV.
 pub const DIAGNOSTICS_HEADER: &str =
@@ -74,7 +74,7 @@ pub fn observation(ctx: &Context, frame: u32) -> Result<Observation> {
 }
 
 /// Reads a cached frame's pose.
-fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
+pub fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
     let path = ctx.cache.stage_dir("fit").join(&files(frame)[0]);
     let poses = crate::poses::read(&path, skeleton)?;
     poses
@@ -197,7 +197,7 @@ fn write_frame(
 
 /// Concatenates the frames' artifacts into the output folder: joints.csv, poses.csv and
 /// fit.csv, in frame order.
-pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<(Vec<PathBuf>, Vec<String>)> {
+pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
     let mut frames = frames.to_vec();
     frames.sort_unstable();
     let dir = ctx.cache.stage_dir("fit");
@@ -229,7 +229,11 @@ pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<(Vec<PathBuf>, Vec
     for (path, text) in &written {
         crate::fsutil::write_atomic(path, text.as_bytes())?;
     }
-    Ok((written.into_iter().map(|x| x.0).collect(), Vec::new()))
+    Ok(super::Finished {
+        outputs: written.into_iter().map(|x| x.0).collect(),
+        files: 3,
+        warnings: Vec::new(),
+    })
 }
 
 /// Parses a diagnostics CSV (the per-frame file or fit.csv): (frame, status, rest).

@@ -48,6 +48,9 @@ pub enum Scope {
     /// One artifact per frame from t0 to the selected frames, computed in order from t0,
     /// each from its neighbour's (the fit). Skipped when the sequence has no skeleton.yaml.
     Tracked,
+    /// No per-frame artifacts: after its inputs, its `finish` writes outputs for the
+    /// selected frames from the cache (the exports). It always runs; it computes nothing.
+    Sequence,
 }
 
 /// A stage as the runner sees it.
@@ -72,8 +75,19 @@ pub struct StageDef {
     pub finish: Option<FinishFn>,
 }
 
-/// A stage's sequence-level step: (files written, warnings).
-pub type FinishFn = fn(&Context, &[u32]) -> Result<(Vec<std::path::PathBuf>, Vec<String>)>;
+/// A stage's sequence-level step (given the frames, in computation order).
+pub type FinishFn = fn(&Context, &[u32]) -> Result<Finished>;
+
+/// What a stage's sequence-level step wrote.
+#[derive(Debug, Default)]
+pub struct Finished {
+    /// Files or folders written to the output folder, for the summary.
+    pub outputs: Vec<std::path::PathBuf>,
+    /// Number of files written.
+    pub files: usize,
+    /// Things the user should know.
+    pub warnings: Vec<String>,
+}
 
 /// What a stage wrote for one frame.
 #[derive(Debug, Default)]
@@ -152,7 +166,28 @@ pub const STAGES: &[StageDef] = &[
         compute: fit::compute,
         finish: Some(fit::finish),
     },
+    StageDef {
+        name: "export",
+        scope: Scope::Sequence,
+        about: "glb, bvh, ply, obj and overlay exports of the cached results",
+        inputs: &["visual_hull", "graphcut", "reliability", "model", "fit"],
+        format_version: 1,
+        params: |c| crate::yaml::to_string(&c.export).unwrap_or_default(),
+        sources: |_, _, _| Ok(()),
+        compute: |_, _| Ok(Output::default()),
+        finish: Some(export_finish),
+    },
 ];
+
+/// The export stage: every format `export.formats` lists, for the selected frames.
+fn export_finish(ctx: &Context, frames: &[u32]) -> Result<Finished> {
+    let w = crate::export::run(ctx, frames, &ctx.config.export.formats)?;
+    Ok(Finished {
+        outputs: w.outputs,
+        files: w.files,
+        warnings: w.warnings,
+    })
+}
 
 /// The stage named `name`, or an error listing the stages.
 pub fn find(name: &str) -> Result<&'static StageDef> {

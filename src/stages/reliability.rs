@@ -392,7 +392,7 @@ pub fn depth_maps(cams: &[Camera], mesh: &TriMesh) -> Vec<Vec<f32>> {
 
 /// The farthest depth of the 2 x 2 pixels around the projection `(x, y)`: a vertex is
 /// hidden only if every pixel around it sees something closer.
-fn farthest_around(depth: &[f32], width: usize, height: usize, x: f64, y: f64) -> f32 {
+pub(crate) fn farthest_around(depth: &[f32], width: usize, height: usize, x: f64, y: f64) -> f32 {
     let (x0, y0) = (x.floor().max(0.0) as usize, y.floor().max(0.0) as usize);
     let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
     depth[y0 * width + x0]

@@ -1,0 +1,102 @@
+//! World axes of the exports: glTF and (most readers of) BVH take +Y as up, while the
+//! dataset contract leaves the up axis to the capture. When pipeline.yaml names it
+//! (`export.up_axis`), exports turn the world by the proper rotation that takes it to +Y.
+
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// The world's up direction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum UpAxis {
+    PlusX,
+    MinusX,
+    PlusY,
+    MinusY,
+    PlusZ,
+    MinusZ,
+}
+
+impl TryFrom<String> for UpAxis {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        Ok(match s.trim() {
+            "+x" | "x" | "+X" | "X" => UpAxis::PlusX,
+            "-x" | "-X" => UpAxis::MinusX,
+            "+y" | "y" | "+Y" | "Y" => UpAxis::PlusY,
+            "-y" | "-Y" => UpAxis::MinusY,
+            "+z" | "z" | "+Z" | "Z" => UpAxis::PlusZ,
+            "-z" | "-Z" => UpAxis::MinusZ,
+            other => {
+                return Err(format!(
+                    "'{other}' is not an axis; use +x, -x, +y, -y, +z or -z"
+                ))
+            }
+        })
+    }
+}
+
+impl From<UpAxis> for String {
+    fn from(a: UpAxis) -> String {
+        match a {
+            UpAxis::PlusX => "+x",
+            UpAxis::MinusX => "-x",
+            UpAxis::PlusY => "+y",
+            UpAxis::MinusY => "-y",
+            UpAxis::PlusZ => "+z",
+            UpAxis::MinusZ => "-z",
+        }
+        .into()
+    }
+}
+
+/// The rotation C from world axes to export axes (+Y up, right-handed): a world point x is
+/// written as C x. The identity when the up axis is unknown or already +Y.
+pub fn to_y_up(up: Option<UpAxis>) -> Rotation3<f64> {
+    // Rows of C: each maps the world's axes so that `up` lands on +Y with det C = +1.
+    let rows: [[f64; 3]; 3] = match up {
+        None | Some(UpAxis::PlusY) => return Rotation3::identity(),
+        Some(UpAxis::MinusY) => [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
+        Some(UpAxis::PlusZ) => [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]],
+        Some(UpAxis::MinusZ) => [[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],
+        Some(UpAxis::PlusX) => [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+        Some(UpAxis::MinusX) => [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+    };
+    Rotation3::from_matrix_unchecked(Matrix3::from_fn(|i, j| rows[i][j]))
+}
+
+/// The world's up direction as a vector.
+pub fn up_vector(up: UpAxis) -> Vector3<f64> {
+    match up {
+        UpAxis::PlusX => Vector3::x(),
+        UpAxis::MinusX => -Vector3::x(),
+        UpAxis::PlusY => Vector3::y(),
+        UpAxis::MinusY => -Vector3::y(),
+        UpAxis::PlusZ => Vector3::z(),
+        UpAxis::MinusZ => -Vector3::z(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_up_axis_becomes_plus_y_by_a_proper_rotation() {
+        for up in [
+            UpAxis::PlusX,
+            UpAxis::MinusX,
+            UpAxis::PlusY,
+            UpAxis::MinusY,
+            UpAxis::PlusZ,
+            UpAxis::MinusZ,
+        ] {
+            let c = to_y_up(Some(up));
+            assert!((c * up_vector(up) - Vector3::y()).norm() < 1e-15, "{up:?}");
+            assert!((c.matrix().determinant() - 1.0).abs() < 1e-15, "{up:?}");
+            let s: String = up.into();
+            assert_eq!(UpAxis::try_from(s).unwrap(), up);
+        }
+        assert!(UpAxis::try_from("up".to_string()).is_err());
+    }
+}

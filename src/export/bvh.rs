@@ -1,0 +1,253 @@
+//! BVH (Biovision hierarchy): the skeleton and the fitted motion.
+//!
+//! Each bone becomes a JOINT at its head; OFFSET is the head's offset from the parent's head
+//! at t0 (the rest pose), so the t0 pose is all-zero rotations. The root has six channels
+//! (its posed head as `Xposition Yposition Zposition`, then three rotations; its OFFSET is
+//! zero so readers that add it and readers that do not agree), every other joint three. A
+//! leaf bone's tail is its `End Site`; a bone with children whose tail is not a child's head
+//! gets an extra joint `<bone>_tail` at its tail (three channels, always zero) ending in a
+//! zero End Site, so every head and tail of joints.csv is a BVH joint position.
+//!
+//! Rotations are the pose's local rotations L_b (relative to t0, in the parent's frame,
+//! [`crate::skeleton::pose`]) as Euler angles in degrees in the declared channel order: for
+//! `Zrotation Xrotation Yrotation`, L = Rz(a) Rx(b) Ry(c). With a known up axis, positions
+//! are turned by C and rotations become C L Cᵀ ([`super::axes`]). Units are metres.
+
+use super::axes::{to_y_up, UpAxis};
+use crate::skeleton::{Pose, Skeleton};
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use std::fmt::Write as _;
+
+/// Distance under which a child's head counts as its parent's tail, metres.
+const SAME_POINT: f64 = 1e-6;
+
+/// An Euler rotation order: the axes (0 = X, 1 = Y, 2 = Z) of the first, second and third
+/// rotation, R = R_first R_second R_third.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RotationOrder(pub [usize; 3]);
+
+impl RotationOrder {
+    /// Parses `XYZ`, `ZXY`, ... (any permutation of X, Y, Z).
+    pub fn parse(s: &str) -> Result<RotationOrder, String> {
+        let axes: Vec<usize> = s
+            .trim()
+            .chars()
+            .map(|c| match c.to_ascii_uppercase() {
+                'X' => Some(0),
+                'Y' => Some(1),
+                'Z' => Some(2),
+                _ => None,
+            })
+            .collect::<Option<_>>()
+            .ok_or_else(|| format!("'{s}' is not a rotation order such as ZXY"))?;
+        if axes.len() != 3 || axes[0] == axes[1] || axes[1] == axes[2] || axes[0] == axes[2] {
+            return Err(format!(
+                "'{s}' must name each of X, Y and Z once (e.g. ZXY, XYZ)"
+            ));
+        }
+        Ok(RotationOrder([axes[0], axes[1], axes[2]]))
+    }
+
+    /// The BVH channel names, e.g. `Zrotation Xrotation Yrotation`.
+    pub fn channels(&self) -> String {
+        self.0
+            .iter()
+            .map(|&a| format!("{}rotation", ["X", "Y", "Z"][a]))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+
+    /// Whether the order is a cyclic permutation of XYZ.
+    fn cyclic(&self) -> bool {
+        matches!(self.0, [0, 1, 2] | [1, 2, 0] | [2, 0, 1])
+    }
+
+    /// The rotation of Euler angles (radians) in this order.
+    pub fn compose(&self, angles: [f64; 3]) -> Rotation3<f64> {
+        let axis = |a: usize| Vector3::ith_axis(a);
+        Rotation3::from_axis_angle(&axis(self.0[0]), angles[0])
+            * Rotation3::from_axis_angle(&axis(self.0[1]), angles[1])
+            * Rotation3::from_axis_angle(&axis(self.0[2]), angles[2])
+    }
+
+    /// Euler angles (radians) of `r` in this order: the middle angle in [-90°, 90°]; at
+    /// gimbal lock (middle angle ±90°) the third angle is set to zero.
+    pub fn decompose(&self, r: &Matrix3<f64>) -> [f64; 3] {
+        let [i, j, k] = self.0;
+        // s = +1 for cyclic orders, -1 otherwise: the signs of the off-diagonal terms flip.
+        let s = if self.cyclic() { 1.0 } else { -1.0 };
+        let sin_b = (s * r[(i, k)]).clamp(-1.0, 1.0);
+        let b = sin_b.asin();
+        if sin_b.abs() < 1.0 - 1e-12 {
+            let a = (-s * r[(j, k)]).atan2(r[(k, k)]);
+            let c = (-s * r[(i, j)]).atan2(r[(i, i)]);
+            [a, b, c]
+        } else {
+            // R = R_i(a) R_j(b): column j of R is R_i(a) e_j.
+            let a = (s * r[(k, j)]).atan2(r[(j, j)]);
+            [a, b, 0.0]
+        }
+    }
+}
+
+/// Writes the HIERARCHY section, depth first: the order in which MOTION lists channels.
+struct Hierarchy<'a> {
+    skeleton: &'a Skeleton,
+    children: Vec<Vec<usize>>,
+    /// World to export axes.
+    c: Rotation3<f64>,
+    order: RotationOrder,
+    text: String,
+    /// Per written joint, the bone whose rotation drives it (None: a tail joint, zeros).
+    joints: Vec<Option<usize>>,
+}
+
+impl Hierarchy<'_> {
+    fn name(&self, b: usize) -> String {
+        self.skeleton.bones[b]
+            .name
+            .chars()
+            .map(|ch| if ch.is_whitespace() { '_' } else { ch })
+            .collect()
+    }
+
+    fn line(&mut self, depth: usize, s: &str) {
+        let _ = writeln!(self.text, "{}{s}", "  ".repeat(depth));
+    }
+
+    fn end_site(&mut self, depth: usize, offset: &Vector3<f64>) {
+        self.line(depth, "End Site");
+        self.line(depth, "{");
+        self.line(depth + 1, &format!("OFFSET {}", v3(offset)));
+        self.line(depth, "}");
+    }
+
+    fn joint(&mut self, b: usize, depth: usize) {
+        let bone = &self.skeleton.bones[b];
+        let rotations = self.order.channels();
+        let (keyword, offset, channels) = match bone.parent {
+            None => (
+                "ROOT",
+                Vector3::zeros(),
+                format!("6 Xposition Yposition Zposition {rotations}"),
+            ),
+            Some(p) => (
+                "JOINT",
+                self.c * (bone.head - self.skeleton.bones[p].head),
+                format!("3 {rotations}"),
+            ),
+        };
+        self.line(depth, &format!("{keyword} {}", self.name(b)));
+        self.line(depth, "{");
+        self.line(depth + 1, &format!("OFFSET {}", v3(&offset)));
+        self.line(depth + 1, &format!("CHANNELS {channels}"));
+        self.joints.push(Some(b));
+        let tail = self.c * (bone.tail - bone.head);
+        let children = self.children[b].clone();
+        if children.is_empty() {
+            self.end_site(depth + 1, &tail);
+        } else {
+            for &ch in &children {
+                self.joint(ch, depth + 1);
+            }
+            let tail_is_a_head = children
+                .iter()
+                .any(|&ch| (self.skeleton.bones[ch].head - bone.tail).norm() <= SAME_POINT);
+            if !tail_is_a_head {
+                self.line(depth + 1, &format!("JOINT {}_tail", self.name(b)));
+                self.line(depth + 1, "{");
+                self.line(depth + 2, &format!("OFFSET {}", v3(&tail)));
+                self.line(depth + 2, &format!("CHANNELS 3 {rotations}"));
+                self.joints.push(None);
+                self.end_site(depth + 2, &Vector3::zeros());
+                self.line(depth + 1, "}");
+            }
+        }
+        self.line(depth, "}");
+    }
+}
+
+fn v3(v: &Vector3<f64>) -> String {
+    format!("{:.6} {:.6} {:.6}", v.x, v.y, v.z)
+}
+
+/// The BVH text of `skeleton` animated by `poses` ((frame, pose) in frame order).
+pub fn to_bvh(
+    skeleton: &Skeleton,
+    poses: &[(u32, Pose)],
+    frame_rate: f64,
+    up: Option<UpAxis>,
+    order: RotationOrder,
+) -> String {
+    let c = to_y_up(up);
+    let mut h = Hierarchy {
+        skeleton,
+        children: skeleton.children(),
+        c,
+        order,
+        text: String::from("HIERARCHY\n"),
+        joints: Vec::new(),
+    };
+    for root in (0..skeleton.bones.len()).filter(|&b| skeleton.bones[b].parent.is_none()) {
+        h.joint(root, 0);
+    }
+    let (mut text, joints) = (h.text, h.joints);
+    let _ = writeln!(text, "MOTION");
+    let _ = writeln!(text, "Frames: {}", poses.len());
+    let _ = writeln!(text, "Frame Time: {:.8}", 1.0 / frame_rate);
+    for (_, pose) in poses {
+        let mut line = Vec::with_capacity(3 * joints.len() + 3);
+        for j in &joints {
+            let Some(b) = *j else {
+                line.extend(["0.000000".to_string(), "0.000000".into(), "0.000000".into()]);
+                continue;
+            };
+            let bone = &skeleton.bones[b];
+            if bone.parent.is_none() {
+                let p = c * (bone.head + pose.translation);
+                line.extend([p.x, p.y, p.z].map(|x| format!("{x:.6}")));
+            }
+            let local = c * pose.rotations[b] * c.inverse();
+            let angles = order.decompose(local.matrix());
+            line.extend(angles.map(|a| format!("{:.6}", a.to_degrees())));
+        }
+        let _ = writeln!(text, "{}", line.join(" "));
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn euler_angles_round_trip_in_every_order() {
+        let orders = ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"];
+        let mut seed = 7u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for o in orders {
+            let order = RotationOrder::parse(o).unwrap();
+            for t in 0..200 {
+                let mut angles = [rnd() * 3.1, rnd() * 1.5, rnd() * 3.1];
+                if t % 20 == 0 {
+                    angles[1] = std::f64::consts::FRAC_PI_2 * if t % 40 == 0 { 1.0 } else { -1.0 };
+                }
+                let r = order.compose(angles);
+                let back = order.compose(order.decompose(r.matrix()));
+                let gap = (r.matrix() - back.matrix()).abs().max();
+                assert!(gap < 1e-9, "{o} {angles:?}: {gap:e}");
+            }
+        }
+        assert!(RotationOrder::parse("XXY").is_err());
+        assert!(RotationOrder::parse("XY").is_err());
+        assert_eq!(
+            RotationOrder::parse("zxy").unwrap().channels(),
+            "Zrotation Xrotation Yrotation"
+        );
+    }
+}

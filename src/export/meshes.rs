@@ -1,0 +1,200 @@
+//! Every reconstruction's meshes as binary PLY or OBJ, for MeshLab, Blender and the like.
+//!
+//! Per selected frame: `visual_hull/NNNNNN` and `graphcut/NNNNNN` (the surfaces, coloured
+//! from the input frames: per vertex the cos-weighted mean colour over the cameras that see
+//! it, facing and not hidden), and with a skeleton `fit/NNNNNN` (the posed model coloured by
+//! part) plus `model` (the t0 body model). PLY carries normals, colours and a `quality` that
+//! MeshLab reads as its scalar: the number of cameras seeing the vertex (hull), rho_p
+//! (refined surface, with raw `zncc`, `rho_p` and `cameras` beside it when the reliability
+//! is cached) and the part index (fit, model).
+
+use super::Format;
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::geometry::obj::write_obj;
+use crate::geometry::ply::{read_ply, write_ply, PlyFormat, VertexAttributes};
+use crate::geometry::TriMesh;
+use crate::stages::{hull_files, reliability, Context};
+use image::RgbImage;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use std::path::Path;
+
+/// Per vertex of `mesh` (normals `normals`): the cos-weighted mean colour over the cameras
+/// that see it (facing it, and not hidden behind the mesh by more than `tolerance` metres in
+/// the camera's depth map), and how many cameras see it. Unseen vertices are mid grey.
+pub fn image_colours(
+    cams: &[Camera],
+    images: &[RgbImage],
+    mesh: &TriMesh,
+    normals: &[Vector3<f64>],
+    tolerance: f64,
+) -> (Vec<[u8; 3]>, Vec<f32>) {
+    let depth = reliability::depth_maps(cams, mesh);
+    let centres: Vec<Vector3<f64>> = cams.iter().map(Camera::centre).collect();
+    mesh.vertices
+        .par_iter()
+        .zip(normals.par_iter())
+        .map(|(v, n)| {
+            let (mut sum, mut weight, mut seen) = ([0.0f64; 3], 0.0, 0u32);
+            for (c, cam) in cams.iter().enumerate() {
+                let to_cam = (centres[c] - v).normalize();
+                let facing = n.dot(&to_cam);
+                if facing <= 0.0 {
+                    continue;
+                }
+                let (px, z) = cam.project_with_depth(v);
+                if z <= 0.0 || !cam.in_image(&px) {
+                    continue;
+                }
+                let (w, h) = (cam.width as usize, cam.height as usize);
+                let front = reliability::farthest_around(&depth[c], w, h, px.x, px.y);
+                if z as f32 > front + tolerance as f32 {
+                    continue;
+                }
+                let (x, y) = (px.x.round() as u32, px.y.round() as u32);
+                let p = images[c].get_pixel(x.min(cam.width - 1), y.min(cam.height - 1));
+                for (s, &channel) in sum.iter_mut().zip(&p.0) {
+                    *s += facing * channel as f64;
+                }
+                weight += facing;
+                seen += 1;
+            }
+            let colour = if weight > 0.0 {
+                sum.map(|s| (s / weight).round().clamp(0.0, 255.0) as u8)
+            } else {
+                [128, 128, 128]
+            };
+            (colour, seen as f32)
+        })
+        .unzip()
+}
+
+/// One mesh with its attributes, written as PLY or OBJ at `stem` (no extension).
+fn write_one(
+    format: Format,
+    stem: &Path,
+    mesh: &TriMesh,
+    colours: &[[u8; 3]],
+    scalars: Vec<(&str, &[f32])>,
+) -> Result<()> {
+    let normals = mesh.vertex_normals();
+    match format {
+        Format::Obj => write_obj(
+            &stem.with_extension("obj"),
+            mesh,
+            Some(&normals),
+            Some(colours),
+        ),
+        _ => write_ply(
+            &stem.with_extension("ply"),
+            mesh,
+            &VertexAttributes {
+                normals: Some(&normals),
+                colors: Some(colours),
+                scalars,
+            },
+            PlyFormat::BinaryLittleEndian,
+        ),
+    }
+}
+
+/// Writes the meshes of `frames` in `format` (PLY or OBJ) under `dir`; returns the number
+/// of files.
+pub fn write(
+    ctx: &Context,
+    frames: &[u32],
+    format: Format,
+    dir: &Path,
+    has_skeleton: bool,
+) -> Result<usize> {
+    let seq = ctx.sequence;
+    let tolerance = ctx.config.reliability.depth_tolerance * ctx.config.visual_hull.voxel_size;
+    let model = if has_skeleton {
+        Some(crate::stages::model::load(ctx)?)
+    } else {
+        None
+    };
+    let part_colours = |m: &crate::skeleton::model::BodyModel| -> (Vec<[u8; 3]>, Vec<f32>) {
+        m.labels
+            .iter()
+            .map(|&l| (crate::stages::model::part_colour(l), l as f32))
+            .unzip()
+    };
+    let mut files = 0;
+    if let Some(m) = &model {
+        let (colours, parts) = part_colours(m);
+        write_one(
+            format,
+            &dir.join("model"),
+            &m.mesh,
+            &colours,
+            vec![("quality", &parts)],
+        )?;
+        files += 1;
+    }
+    for &frame in frames {
+        let stem = crate::dataset::frame_stem(frame);
+        let images: Vec<RgbImage> = (0..seq.cameras.len())
+            .into_par_iter()
+            .map(|c| seq.load_frame(c, frame))
+            .collect::<Result<_>>()?;
+        let (ply, _) = hull_files(frame);
+        let hull = read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
+        let (colours, seen) = image_colours(
+            &seq.cameras,
+            &images,
+            &hull,
+            &hull.vertex_normals(),
+            tolerance,
+        );
+        write_one(
+            format,
+            &dir.join("visual_hull").join(&stem),
+            &hull,
+            &colours,
+            vec![("quality", &seen)],
+        )?;
+        let refined = read_ply(&ctx.cache.stage_dir("graphcut").join(&ply))?;
+        let (colours, seen) = image_colours(
+            &seq.cameras,
+            &images,
+            &refined,
+            &refined.vertex_normals(),
+            tolerance,
+        );
+        let observed = crate::stages::load_observed(ctx, frame)
+            .ok()
+            .filter(|o| o.vertices.len() == refined.vertices.len());
+        let scalars: Vec<(&str, &[f32])> = match &observed {
+            Some(o) => vec![
+                ("quality", &o.rho_p),
+                ("zncc", &o.zncc),
+                ("rho_p", &o.rho_p),
+                ("cameras", &seen),
+            ],
+            None => vec![("quality", &seen)],
+        };
+        write_one(
+            format,
+            &dir.join("graphcut").join(&stem),
+            &refined,
+            &colours,
+            scalars,
+        )?;
+        files += 2;
+        if let Some(m) = &model {
+            let pose = crate::stages::fit::cached_pose(ctx, &m.skeleton, frame)?;
+            let (colours, parts) = part_colours(m);
+            write_one(
+                format,
+                &dir.join("fit").join(&stem),
+                &m.pose(&pose),
+                &colours,
+                vec![("quality", &parts)],
+            )?;
+            files += 1;
+        }
+    }
+    Ok(files)
+}

@@ -1,0 +1,191 @@
+//! Exports for other tools: the skinned model and its motion as glTF 2.0 binary (.glb), the
+//! motion as BVH, every reconstruction's meshes as PLY and OBJ, and overlay pictures of the
+//! fitted skeleton on the input frames. All are written from the cache, nothing is
+//! recomputed: `pipeline run` writes them after the fit (stage `export`), and
+//! `pipeline export FILE --format F` rewrites one format from what the cache holds.
+//!
+//! Layout under `<output>/export/`: `<sequence>.glb`, `<sequence>.bvh`,
+//! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit) and
+//! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `overlays/contact/NNNNNN.png`.
+
+pub mod axes;
+pub mod bvh;
+pub mod gltf;
+pub mod meshes;
+pub mod overlays;
+
+use crate::error::{Error, Result};
+use crate::skeleton::model::BodyModel;
+use crate::skeleton::Pose;
+use crate::stages::Context;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+pub use axes::UpAxis;
+
+/// One export format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// glTF 2.0 binary: the skinned body model with the fitted motion as an animation.
+    Glb,
+    /// BVH: the skeleton hierarchy and the fitted motion.
+    Bvh,
+    /// Binary PLY of every reconstruction's meshes (normals, colours, quality).
+    Ply,
+    /// Wavefront OBJ of every reconstruction's meshes (normals, vertex colours).
+    Obj,
+    /// PNG overlays of the fitted skeleton and the silhouette outline on the input frames,
+    /// and a contact sheet of all cameras per frame.
+    Overlay,
+}
+
+impl Format {
+    pub const ALL: [Format; 5] = [
+        Format::Glb,
+        Format::Bvh,
+        Format::Ply,
+        Format::Obj,
+        Format::Overlay,
+    ];
+
+    /// Whether the format needs the fitted motion (a skeleton).
+    fn needs_motion(self) -> bool {
+        matches!(self, Format::Glb | Format::Bvh | Format::Overlay)
+    }
+}
+
+/// Parameters of the exports (pipeline.yaml key `export`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExportParams {
+    /// What `pipeline run` exports after the fit.
+    pub formats: Vec<Format>,
+    /// Capture frame rate, frames per second: the animation's timing (glb, bvh).
+    pub frame_rate: f64,
+    /// The world's up direction (`+x`, `-x`, `+y`, `-y`, `+z`, `-z`), when known: glb and
+    /// bvh are turned so that it becomes +Y, as both formats expect. Unset: the world axes
+    /// are written unchanged.
+    pub up_axis: Option<UpAxis>,
+    /// Euler rotation order of the BVH channels (`ZXY`, `XYZ`, ...): the rotation is
+    /// R = R_first R_second R_third, angles in degrees.
+    pub bvh_rotation_order: String,
+    /// Cameras whose views get skeleton overlays (empty: the first camera).
+    pub overlay_cameras: Vec<String>,
+    /// Whether a contact sheet of all cameras is drawn per frame.
+    pub contact_sheet: bool,
+}
+
+impl Default for ExportParams {
+    fn default() -> Self {
+        ExportParams {
+            formats: Format::ALL.to_vec(),
+            frame_rate: 25.0,
+            up_axis: None,
+            bvh_rotation_order: "ZXY".into(),
+            overlay_cameras: Vec::new(),
+            contact_sheet: true,
+        }
+    }
+}
+
+/// Checks the parameters; the message names the key.
+pub fn validate(p: &ExportParams) -> std::result::Result<(), String> {
+    if !(p.frame_rate.is_finite() && p.frame_rate > 0.0) {
+        return Err(format!(
+            "key 'export.frame_rate': {} is not a positive number of frames per second",
+            p.frame_rate
+        ));
+    }
+    bvh::RotationOrder::parse(&p.bvh_rotation_order)
+        .map_err(|m| format!("key 'export.bvh_rotation_order': {m}"))?;
+    Ok(())
+}
+
+/// What an export wrote.
+#[derive(Debug, Default)]
+pub struct Written {
+    /// Files or folders, for the summary.
+    pub outputs: Vec<PathBuf>,
+    /// Number of files written.
+    pub files: usize,
+    /// Things the user should know (e.g. no skeleton, so no motion).
+    pub warnings: Vec<String>,
+}
+
+/// The export folder of a job.
+pub fn folder(job_output: &std::path::Path) -> PathBuf {
+    job_output.join("export")
+}
+
+/// The fitted motion of the selected frames, from the fit's cache: the model and
+/// (frame, pose) in frame order.
+pub fn load_motion(ctx: &Context, frames: &[u32]) -> Result<(BodyModel, Vec<(u32, Pose)>)> {
+    let model = crate::stages::model::load(ctx)?;
+    let mut frames = frames.to_vec();
+    frames.sort_unstable();
+    let poses = frames
+        .iter()
+        .map(|&f| Ok((f, crate::stages::fit::cached_pose(ctx, &model.skeleton, f)?)))
+        .collect::<Result<Vec<_>>>()?;
+    Ok((model, poses))
+}
+
+/// Writes `formats` for `frames` from the cache (which must hold them: the export stage runs
+/// after the stages it reads, and `pipeline export` checks first).
+pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Written> {
+    let mut written = Written::default();
+    let has_skeleton = ctx.sequence.skeleton()?.is_some();
+    let out = folder(&ctx.config.output);
+    let p = &ctx.config.export;
+    let mut formats = formats.to_vec();
+    formats.dedup();
+    if !has_skeleton && formats.iter().any(|f| f.needs_motion()) {
+        written.warnings.push(format!(
+            "export: {} has no skeleton.yaml, so there is no motion to export as glb, bvh or overlays",
+            ctx.sequence.dir.display()
+        ));
+        formats.retain(|f| !f.needs_motion());
+    }
+    let motion = if formats.iter().any(|f| f.needs_motion()) {
+        Some(load_motion(ctx, frames)?)
+    } else {
+        None
+    };
+    let name = ctx.sequence.name();
+    for format in formats {
+        match format {
+            Format::Glb => {
+                let (model, poses) = motion.as_ref().expect("loaded");
+                let path = out.join(format!("{name}.glb"));
+                let bytes = gltf::to_glb(model, poses, p.frame_rate, p.up_axis, &name);
+                crate::fsutil::write_atomic(&path, &bytes)?;
+                written.outputs.push(path);
+                written.files += 1;
+            }
+            Format::Bvh => {
+                let (model, poses) = motion.as_ref().expect("loaded");
+                let order = bvh::RotationOrder::parse(&p.bvh_rotation_order)
+                    .map_err(|m| Error::invalid(&ctx.config.path, m))?;
+                let path = out.join(format!("{name}.bvh"));
+                let text = bvh::to_bvh(&model.skeleton, poses, p.frame_rate, p.up_axis, order);
+                crate::fsutil::write_atomic(&path, text.as_bytes())?;
+                written.outputs.push(path);
+                written.files += 1;
+            }
+            Format::Ply | Format::Obj => {
+                let n = meshes::write(ctx, frames, format, &out.join("meshes"), has_skeleton)?;
+                written.outputs.push(out.join("meshes"));
+                written.files += n;
+            }
+            Format::Overlay => {
+                let (model, poses) = motion.as_ref().expect("loaded");
+                let n = overlays::write(ctx, model, poses, &out.join("overlays"))?;
+                written.outputs.push(out.join("overlays"));
+                written.files += n;
+            }
+        }
+    }
+    written.outputs.dedup();
+    Ok(written)
+}
