@@ -70,23 +70,26 @@ pub fn image_colours(
         .unzip()
 }
 
-/// One mesh with its attributes, written as PLY or OBJ at `stem` (no extension).
+/// One mesh with its attributes, written in each of `formats` (PLY, OBJ) at `stem` (no
+/// extension); returns the number of files.
 fn write_one(
-    format: Format,
+    formats: &[Format],
     stem: &Path,
     mesh: &TriMesh,
     colours: &[[u8; 3]],
     scalars: Vec<(&str, &[f32])>,
-) -> Result<()> {
+) -> Result<usize> {
     let normals = mesh.vertex_normals();
-    match format {
-        Format::Obj => write_obj(
+    if formats.contains(&Format::Obj) {
+        write_obj(
             &stem.with_extension("obj"),
             mesh,
             Some(&normals),
             Some(colours),
-        ),
-        _ => write_ply(
+        )?;
+    }
+    if formats.contains(&Format::Ply) {
+        write_ply(
             &stem.with_extension("ply"),
             mesh,
             &VertexAttributes {
@@ -95,16 +98,20 @@ fn write_one(
                 scalars,
             },
             PlyFormat::BinaryLittleEndian,
-        ),
+        )?;
     }
+    Ok(formats
+        .iter()
+        .filter(|f| matches!(f, Format::Ply | Format::Obj))
+        .count())
 }
 
-/// Writes the meshes of `frames` in `format` (PLY or OBJ) under `dir`; returns the number
-/// of files.
+/// Writes the meshes of `frames` in `formats` (PLY and / or OBJ) under `dir`; returns the
+/// number of files.
 pub fn write(
     ctx: &Context,
     frames: &[u32],
-    format: Format,
+    formats: &[Format],
     dir: &Path,
     has_skeleton: bool,
 ) -> Result<usize> {
@@ -124,16 +131,17 @@ pub fn write(
     let mut files = 0;
     if let Some(m) = &model {
         let (colours, parts) = part_colours(m);
-        write_one(
-            format,
+        files += write_one(
+            formats,
             &dir.join("model"),
             &m.mesh,
             &colours,
             vec![("quality", &parts)],
         )?;
-        files += 1;
     }
-    for &frame in frames {
+    // Frames in parallel (each loads its frames once for both formats).
+    let per_frame = frames.par_iter().map(|&frame| -> Result<usize> {
+        let mut files = 0;
         let stem = crate::dataset::frame_stem(frame);
         let images: Vec<RgbImage> = (0..seq.cameras.len())
             .into_par_iter()
@@ -148,8 +156,8 @@ pub fn write(
             &hull.vertex_normals(),
             tolerance,
         );
-        write_one(
-            format,
+        files += write_one(
+            formats,
             &dir.join("visual_hull").join(&stem),
             &hull,
             &colours,
@@ -175,26 +183,29 @@ pub fn write(
             ],
             None => vec![("quality", &seen)],
         };
-        write_one(
-            format,
+        files += write_one(
+            formats,
             &dir.join("graphcut").join(&stem),
             &refined,
             &colours,
             scalars,
         )?;
-        files += 2;
         if let Some(m) = &model {
             let pose = crate::stages::fit::cached_pose(ctx, &m.skeleton, frame)?;
             let (colours, parts) = part_colours(m);
-            write_one(
-                format,
+            files += write_one(
+                formats,
                 &dir.join("fit").join(&stem),
                 &m.pose(&pose),
                 &colours,
                 vec![("quality", &parts)],
             )?;
-            files += 1;
         }
-    }
+        Ok(files)
+    });
+    files += per_frame
+        .collect::<Result<Vec<usize>>>()?
+        .iter()
+        .sum::<usize>();
     Ok(files)
 }

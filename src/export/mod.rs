@@ -139,6 +139,7 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Written>
     let out = folder(&ctx.config.output);
     let p = &ctx.config.export;
     let mut formats = formats.to_vec();
+    formats.sort_by_key(|f| Format::ALL.iter().position(|g| g == f));
     formats.dedup();
     if !has_skeleton && formats.iter().any(|f| f.needs_motion()) {
         written.warnings.push(format!(
@@ -153,7 +154,7 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Written>
         None
     };
     let name = ctx.sequence.name();
-    for format in formats {
+    for &format in &formats {
         match format {
             Format::Glb => {
                 let (model, poses) = motion.as_ref().expect("loaded");
@@ -174,7 +175,22 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Written>
                 written.files += 1;
             }
             Format::Ply | Format::Obj => {
-                let n = meshes::write(ctx, frames, format, &out.join("meshes"), has_skeleton)?;
+                // Both mesh formats in one pass (the colours are computed once).
+                if format == Format::Obj && formats.contains(&Format::Ply) {
+                    continue;
+                }
+                let mesh_formats: Vec<Format> = formats
+                    .iter()
+                    .copied()
+                    .filter(|f| matches!(f, Format::Ply | Format::Obj))
+                    .collect();
+                let n = meshes::write(
+                    ctx,
+                    frames,
+                    &mesh_formats,
+                    &out.join("meshes"),
+                    has_skeleton,
+                )?;
                 written.outputs.push(out.join("meshes"));
                 written.files += n;
             }

@@ -25,6 +25,10 @@ use scene::Scene;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// The export settings of a synthetic capture's pipeline.yaml: its world stands on +z.
+const SYNTH_EXPORT_YAML: &str = "# exports (glb, bvh, ply, obj, overlay) after the fit, under output/export/\n\
+export:\n  up_axis: +z        # the synthetic captures stand on +z; glb and bvh turn it to +Y\n  frame_rate: 25\n";
+
 /// Which scene to make.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SceneKind {
@@ -270,8 +274,11 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     let pipeline_yaml = opts.out.join("pipeline.yaml");
     crate::fsutil::write_atomic(
         &pipeline_yaml,
-        crate::config::default_yaml("calib/cameras.yaml", &format!("data/{}", scene.name))
-            .as_bytes(),
+        format!(
+            "{}{SYNTH_EXPORT_YAML}",
+            crate::config::default_yaml("calib/cameras.yaml", &format!("data/{}", scene.name))
+        )
+        .as_bytes(),
     )?;
     Ok(SynthSummary {
         sequence_dir: seq_dir,
