@@ -1,4 +1,4 @@
-//! The artifact store: content keys, manifests beside artifacts, and the cache lock.
+//! The artifact store: content keys, manifests beside artifacts, and per-frame cache locks.
 //!
 //! Layout: `<cache>/<stage>/<NNNNNN>.manifest.yaml` describes the artifact of one stage and
 //! frame (its key and files); the files live under `<cache>/<stage>/`. Files are written
@@ -127,9 +127,12 @@ impl Cache {
         )
     }
 
-    /// Removes temporary files an interrupted run left behind (only call under the lock).
+    /// Removes temporary files that runs on this host left behind when they were
+    /// interrupted: those whose writer (the host and process id in the name, see
+    /// [`crate::fsutil`]) is no longer running. Temporaries of live runs (other shards on
+    /// the same cache) and of other hosts are left alone.
     pub fn sweep_temporaries(&self) {
-        fn walk(dir: &Path) {
+        fn walk(dir: &Path, host: &str) {
             let Ok(entries) = std::fs::read_dir(dir) else {
                 return;
             };
@@ -137,39 +140,100 @@ impl Cache {
                 let p = e.path();
                 let name = e.file_name().to_string_lossy().into_owned();
                 if p.is_dir() {
-                    walk(&p);
-                } else if name.starts_with('.') && name.contains(".tmp-") {
-                    let _ = std::fs::remove_file(&p);
+                    walk(&p, host);
+                } else if let Some((writer_host, pid)) = crate::fsutil::temp_writer(&name) {
+                    let alive = Path::new(&format!("/proc/{pid}")).exists();
+                    if writer_host == host && !alive {
+                        let _ = std::fs::remove_file(&p);
+                    }
                 }
             }
         }
-        walk(&self.root);
+        walk(&self.root, &crate::fsutil::host_name());
     }
 
-    /// Takes the cache's exclusive lock; a second concurrent run is refused. The lock is
-    /// released when the returned guard drops or the process ends (even by SIGKILL).
-    pub fn lock(&self) -> Result<CacheLock> {
+    /// Locks `frames` of this cache for one run: a second run that wants any of them is
+    /// refused until this one ends, while runs over disjoint frames proceed together (shards
+    /// of one sequence on a shared cache). The locks are POSIX record locks on the bytes of
+    /// `<cache>/.lock` (byte f for frame f), which network filesystems with lock support
+    /// honour across machines; the system releases them when the process ends, however
+    /// it ends.
+    pub fn lock_frames(&self, frames: &[u32]) -> Result<CacheLock> {
         crate::fsutil::create_dir_all(&self.root)?;
         let path = self.root.join(".lock");
         let file = File::options()
             .create(true)
             .truncate(false)
+            .read(true)
             .write(true)
             .open(&path)
             .map_err(|e| Error::io(&path, e))?;
-        match file.try_lock() {
-            Ok(()) => Ok(CacheLock { _file: file }),
-            Err(std::fs::TryLockError::WouldBlock) => Err(Error::invalid(
-                &self.root,
-                "another pipeline run is using this cache; wait for it to finish \
-                 (or give this run another cache folder in pipeline.yaml)",
-            )),
-            Err(std::fs::TryLockError::Error(e)) => Err(Error::io(&path, e)),
+        let mut sorted = frames.to_vec();
+        sorted.sort_unstable();
+        sorted.dedup();
+        // Contiguous runs of frames, one lock call each.
+        let mut ranges: Vec<(u32, u32)> = Vec::new();
+        for f in sorted {
+            match ranges.last_mut() {
+                Some(r) if r.1 + 1 == f => r.1 = f,
+                _ => ranges.push((f, f)),
+            }
         }
+        for (first, last) in ranges {
+            if let Err(busy) = record_lock(&file, first, last) {
+                return Err(match busy {
+                    Some((frame, pid)) => Error::invalid(
+                        &self.root,
+                        format!(
+                            "another pipeline run{} is using frame {frame} of this cache; wait \
+                             for it to finish, run other frames (--frames), or give this run \
+                             another cache folder in pipeline.yaml",
+                            if pid > 0 {
+                                format!(" (process {pid})")
+                            } else {
+                                String::new()
+                            }
+                        ),
+                    ),
+                    None => Error::io(&path, std::io::Error::last_os_error()),
+                });
+            }
+        }
+        Ok(CacheLock { _file: file })
     }
 }
 
-/// Holds the cache lock while alive.
+/// Takes a write lock on bytes `first..=last` of `file` without waiting. On refusal:
+/// `Err(Some((frame, pid)))` names a locked frame and its holder (pid 0 when unknown),
+/// `Err(None)` is an I/O error (in `errno`).
+fn record_lock(file: &File, first: u32, last: u32) -> std::result::Result<(), Option<(u32, i64)>> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: a zeroed `flock` is a valid value of the plain C struct.
+    let mut lock: libc::flock = unsafe { std::mem::zeroed() };
+    lock.l_type = libc::F_WRLCK as libc::c_short;
+    lock.l_whence = libc::SEEK_SET as libc::c_short;
+    lock.l_start = first as libc::off_t;
+    lock.l_len = (last - first + 1) as libc::off_t;
+    // SAFETY: fcntl on an open descriptor with a pointer to a live `flock`.
+    if unsafe { libc::fcntl(file.as_raw_fd(), libc::F_SETLK, &lock) } == 0 {
+        return Ok(());
+    }
+    let err = std::io::Error::last_os_error().raw_os_error();
+    if err != Some(libc::EAGAIN) && err != Some(libc::EACCES) {
+        return Err(None);
+    }
+    // Who holds it: F_GETLK rewrites `lock` with the first conflicting lock.
+    // SAFETY: as above.
+    if unsafe { libc::fcntl(file.as_raw_fd(), libc::F_GETLK, &mut lock) } == 0
+        && lock.l_type != libc::F_UNLCK as libc::c_short
+    {
+        let frame = (lock.l_start.max(first as libc::off_t) as u32).min(last);
+        return Err(Some((frame, lock.l_pid as i64)));
+    }
+    Err(Some((first, 0)))
+}
+
+/// Holds a run's cache locks while alive.
 pub struct CacheLock {
     _file: File,
 }

@@ -15,7 +15,52 @@ fn temp_path_for(path: &Path) -> PathBuf {
         .file_name()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
+    path.with_file_name(format!(
+        ".{name}.tmp-{}-{}-{n}",
+        host_name(),
+        std::process::id()
+    ))
+}
+
+/// This machine's host name (for temporary file names on shared caches), `localhost` when
+/// unknown; characters other than letters, digits, `.` and `_` become `_`.
+pub fn host_name() -> String {
+    static NAME: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    NAME.get_or_init(|| {
+        let mut buf = [0u8; 256];
+        // SAFETY: gethostname writes at most `buf.len()` bytes into the buffer.
+        let ok = unsafe { libc::gethostname(buf.as_mut_ptr().cast(), buf.len()) } == 0;
+        let end = buf.iter().position(|&b| b == 0).unwrap_or(buf.len());
+        let name: String = String::from_utf8_lossy(&buf[..end])
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '.' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        if ok && !name.is_empty() {
+            name
+        } else {
+            "localhost".into()
+        }
+    })
+    .clone()
+}
+
+/// The writer (host, process id) of a temporary file name made by this module
+/// (`.<name>.tmp-<host>-<pid>-<n>`), or `None` for other names.
+pub fn temp_writer(file_name: &str) -> Option<(String, u32)> {
+    if !file_name.starts_with('.') {
+        return None;
+    }
+    let (_, tail) = file_name.rsplit_once(".tmp-")?;
+    let mut parts = tail.rsplitn(3, '-');
+    let _counter: u64 = parts.next()?.parse().ok()?;
+    let pid: u32 = parts.next()?.parse().ok()?;
+    Some((parts.next()?.to_string(), pid))
 }
 
 /// Creates `dir` and its parents.

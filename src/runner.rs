@@ -310,14 +310,22 @@ fn bar(len: usize, stage: &str) -> ProgressBar {
 /// Runs the pipeline: computes what is stale (or forced), reuses the rest.
 pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     let plan = plan(opts)?;
-    let _lock = job.cache.lock()?;
-    job.cache.sweep_temporaries();
-    let wants_reference = plan.iter().any(|(s, _)| s.scope != Scope::PerFrame);
+    let wants_reference = plan
+        .iter()
+        .any(|(s, _)| matches!(s.scope, Scope::Reference | Scope::Tracked));
     let reference = if wants_reference {
         job.reference_frame()?
     } else {
         None
     };
+    // Lock every frame this run may write; shards over disjoint frames run side by side.
+    let mut touched: Vec<u32> = plan
+        .iter()
+        .flat_map(|(s, _)| job.stage_frames(s, reference))
+        .collect();
+    touched.extend(reference);
+    let _lock = job.cache.lock_frames(&touched)?;
+    job.cache.sweep_temporaries();
     let keys = job.keys(reference)?;
     let ctx = job.context();
     let mut reports = Vec::new();

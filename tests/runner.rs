@@ -218,24 +218,85 @@ fn walk(dir: &Path) -> Vec<String> {
     out
 }
 
+/// Holds a POSIX record lock on byte `frame` of `cache/.lock`, as a running pipeline that
+/// computes that frame does.
+fn hold_frame(cache: &Path, frame: u32) -> std::fs::File {
+    use std::os::fd::AsRawFd;
+    std::fs::create_dir_all(cache).unwrap();
+    let file = std::fs::File::options()
+        .create(true)
+        .truncate(false)
+        .read(true)
+        .write(true)
+        .open(cache.join(".lock"))
+        .unwrap();
+    // SAFETY: a zeroed flock is valid; fcntl on an open descriptor.
+    let mut lock: libc::flock = unsafe { std::mem::zeroed() };
+    lock.l_type = libc::F_WRLCK as libc::c_short;
+    lock.l_whence = libc::SEEK_SET as libc::c_short;
+    lock.l_start = frame as libc::off_t;
+    lock.l_len = 1;
+    assert_eq!(
+        unsafe { libc::fcntl(file.as_raw_fd(), libc::F_SETLK, &lock) },
+        0
+    );
+    file
+}
+
 #[test]
-fn a_concurrent_run_is_refused() {
+fn a_concurrent_run_over_the_same_frames_is_refused() {
     let rd = run_dir(tripod(), "tripod", "");
-    std::fs::create_dir_all(rd.path().join("cache")).unwrap();
-    let lock = std::fs::File::create(rd.path().join("cache/.lock")).unwrap();
-    lock.lock().unwrap(); // what a running pipeline holds
-    let (ok, _, err) = rd.run(&[]);
+    let lock = hold_frame(&rd.path().join("cache"), 3);
+    let (ok, _, err) = rd.run(&["--frames", "2..4"]);
     assert!(!ok);
     assert!(
-        err.contains("another pipeline run is using this cache"),
+        err.contains("another pipeline run") && err.contains("frame 3"),
         "{err}"
     );
     assert_eq!(rd.manifests(), 0);
+    // Other frames are free: a shard over them runs beside the holder.
+    assert!(rd.run(&["--frames", "0..1"]).0, "disjoint frames run");
     drop(lock);
     assert!(
-        rd.run(&["--frames", "0..0"]).0,
+        rd.run(&["--frames", "2..4"]).0,
         "runs once the lock is free"
     );
+}
+
+#[test]
+fn shards_started_together_on_one_cache_both_finish() {
+    let rd = run_dir(tripod(), "tripod", "");
+    let spawn = |frames: &str| {
+        std::process::Command::new(pipeline_bin())
+            .args([
+                "run",
+                "pipeline.yaml",
+                "--until",
+                "visual_hull",
+                "--frames",
+                frames,
+            ])
+            .current_dir(rd.path())
+            .output()
+            .unwrap()
+    };
+    let (a, b) = std::thread::scope(|s| {
+        let a = s.spawn(|| spawn("0..9"));
+        let b = s.spawn(|| spawn("10..18"));
+        (a.join().unwrap(), b.join().unwrap())
+    });
+    for out in [&a, &b] {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let (_, out, _) = run_cli(
+        &["run", "pipeline.yaml", "--until", "visual_hull"],
+        rd.path(),
+    );
+    assert!(out.contains("visual_hull: 0 computed, 19 reused"), "{out}");
 }
 
 #[test]
