@@ -24,6 +24,7 @@ pub mod plot;
 pub mod poses;
 pub mod runner;
 pub mod skeleton;
+pub mod slurm;
 pub mod stages;
 pub mod synth;
 pub mod yaml;

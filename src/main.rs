@@ -109,6 +109,34 @@ enum Command {
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
     },
+    /// Write a Slurm batch plan for a frame-sharded run: an array job running the per-frame
+    /// stages on slices of the frames, and a job after it running the model, the fit and the
+    /// exports from the shared cache. Prints the scripts; `--submit` submits them.
+    Slurm {
+        /// The pipeline.yaml (its cache must be on a filesystem every node shares).
+        file: PathBuf,
+        /// Number of array tasks (frame slices).
+        #[arg(long, default_value_t = 4)]
+        shards: usize,
+        /// Slurm partition (default: the cluster's default partition).
+        #[arg(long)]
+        partition: Option<String>,
+        /// Time limit per job, Slurm's format.
+        #[arg(long, default_value = "04:00:00")]
+        time: String,
+        /// CPUs per task (threads per run).
+        #[arg(long, default_value_t = 2)]
+        cpus: usize,
+        /// Memory per task in MB (default: an estimate from the image sizes).
+        #[arg(long, value_name = "MB")]
+        mem: Option<u64>,
+        /// Frames, A..B inclusive (overrides pipeline.yaml).
+        #[arg(long, value_name = "A..B", value_parser = parse_range)]
+        frames: Option<FrameRange>,
+        /// Submit with sbatch and print the job ids.
+        #[arg(long)]
+        submit: bool,
+    },
     /// Time the inner steps of a stage (benchmarks; nothing is written).
     Bench {
         #[command(subcommand)]
@@ -311,6 +339,60 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 written.files,
                 start.elapsed().as_secs_f64()
             );
+        }
+        Command::Slurm {
+            file,
+            shards,
+            partition,
+            time,
+            cpus,
+            mem,
+            frames,
+            submit,
+        } => {
+            let job = Job::load(Config::load(&file)?, frames)?;
+            let opts = hullpose::slurm::SlurmOptions {
+                shards,
+                partition,
+                time,
+                cpus,
+                mem_mb: mem,
+                program: std::env::current_exe()?,
+            };
+            let plan = hullpose::slurm::plan(&job, &opts)?;
+            let (array, last) = hullpose::slurm::write(&plan)?;
+            if submit {
+                let (a, b) = hullpose::slurm::submit(&array, &last)?;
+                println!(
+                    "submitted array job {a} ({} tasks, {} MB each) and job {b} (model, fit, exports; {} MB) after it",
+                    plan.shards.len(),
+                    plan.shard_mem_mb,
+                    plan.final_mem_mb
+                );
+                println!(
+                    "watch with: squeue -j {a},{b}; logs in {}",
+                    plan.dir.display()
+                );
+            } else {
+                println!(
+                    "# {}
+{}",
+                    array.display(),
+                    plan.array_script
+                );
+                println!(
+                    "# {}
+{}",
+                    last.display(),
+                    plan.final_script
+                );
+                println!(
+                    "# submit with: jobid=$(sbatch --parsable {}) && sbatch --dependency=afterok:$jobid {}",
+                    array.display(),
+                    last.display()
+                );
+                println!("# or run: pipeline slurm {} --submit", file.display());
+            }
         }
         Command::Ablation { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
