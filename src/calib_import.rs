@@ -254,6 +254,13 @@ pub fn from_opencv(intri: &Path, extri: &Path, size: Option<(u32, u32)>) -> Resu
             .map_err(|m| Error::invalid(extri, format!("camera '{name}': {m}")))?;
         cameras.push(cam);
     }
+    revalidate(intri, cameras, warnings)
+}
+
+/// Checks imported cameras as cameras.yaml will be checked when read (unique names, also
+/// ignoring case, and every camera's values), so a bad import fails here, naming `source`.
+fn revalidate(source: &Path, cameras: Vec<Camera>, warnings: Vec<String>) -> Result<Imported> {
+    crate::camera::parse_cameras(source, &crate::camera::cameras_to_yaml(&cameras))?;
     Ok(Imported { cameras, warnings })
 }
 
@@ -444,7 +451,7 @@ pub fn from_colmap(dir: &Path) -> Result<Imported> {
     if cameras.is_empty() {
         return Err(Error::invalid(&images_path, "lists no image"));
     }
-    Ok(Imported { cameras, warnings })
+    revalidate(&images_path, cameras, warnings)
 }
 
 /// Parses `WxH` (e.g. `1920x1080`).

@@ -333,9 +333,13 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
     for e in file.cameras {
         let bad = |msg: String| Error::invalid(path, format!("camera '{}': {msg}", e.name));
         check_name(&e.name).map_err(&bad)?;
-        if !seen.insert(e.name.clone()) {
+        // Names become folder names: on a case-insensitive filesystem "Cam0" and "cam0"
+        // would be one folder.
+        if !seen.insert(e.name.to_lowercase()) {
             return Err(bad(
-                "the name is used twice; camera names must be unique".into()
+                "the name is used twice (or differs from another only by case); camera names \
+                 must be unique, also on case-insensitive filesystems"
+                    .into(),
             ));
         }
         let k = e.K;

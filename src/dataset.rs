@@ -53,11 +53,28 @@ pub fn image_dimensions(path: &Path) -> Result<(u32, u32)> {
         })
 }
 
-fn decode(path: &Path) -> Result<image::DynamicImage> {
-    image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?
+/// Decodes an image after checking its header: the dimensions must be `expected` (the
+/// camera's calibration, when given) and within the image cap ([`crate::limits`]), so a
+/// header claiming a huge image is refused before anything is allocated for it.
+fn decode(path: &Path, expected: Option<&Camera>) -> Result<image::DynamicImage> {
+    let open = || -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
+        image::ImageReader::open(path)
+            .map_err(|e| Error::io(path, e))?
+            .with_guessed_format()
+            .map_err(|e| Error::io(path, e))
+    };
+    let (w, h) = image_dimensions(path)?;
+    if let Some(cam) = expected {
+        check_size(path, cam, w, h)?;
+    }
+    crate::limits::check_image(path, w, h)?;
+    let mut reader = open()?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    limits.max_alloc = Some(crate::limits::image_alloc_bytes());
+    reader.limits(limits);
+    reader
         .decode()
         .map_err(|e| Error::invalid(path, format!("cannot decode the image: {e}")))
 }
@@ -282,8 +299,7 @@ impl Sequence {
     }
 
     fn load_rgb(&self, cam: usize, path: &Path) -> Result<RgbImage> {
-        let img = decode(path)?.to_rgb8();
-        check_size(path, &self.cameras[cam], img.width(), img.height())?;
+        let img = decode(path, Some(&self.cameras[cam]))?.to_rgb8();
         Ok(img)
     }
 
@@ -307,8 +323,7 @@ impl Sequence {
             return Ok(None);
         }
         let path = self.mask_path(cam, frame);
-        let mut img = decode(&path)?.to_luma8();
-        check_size(&path, &self.cameras[cam], img.width(), img.height())?;
+        let mut img = decode(&path, Some(&self.cameras[cam]))?.to_luma8();
         for p in img.pixels_mut() {
             p.0[0] = if p.0[0] >= 128 { 255 } else { 0 };
         }

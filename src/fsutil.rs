@@ -99,7 +99,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic_with(path, |w| w.write_all(bytes))
 }
 
-/// Reads a whole text file, naming the path on error.
+/// Reads a whole text file, naming the path on error; files over the text cap
+/// ([`crate::limits`]) are refused before reading.
 pub fn read_to_string(path: &Path) -> Result<String> {
+    crate::limits::check_text_file(path)?;
     std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
 }

@@ -18,6 +18,7 @@ pub mod fsutil;
 pub mod geometry;
 pub mod imageio;
 pub mod joints;
+pub mod limits;
 pub mod maxflow;
 pub mod overlay;
 pub mod plot;

@@ -62,6 +62,7 @@ pub fn write_obj(
 
 /// Reads an OBJ file's geometry (every object, polygons triangulated) as one mesh.
 pub fn read_obj(path: &Path) -> Result<TriMesh> {
+    crate::limits::check_mesh_file(path)?;
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,

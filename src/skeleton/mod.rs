@@ -60,6 +60,18 @@ struct BoneEntry {
     tail: [f64; 3],
 }
 
+/// Bone names appear in CSV rows, BVH joint names and file names: a plain file name
+/// ([`crate::camera::check_name`]) without commas, quotes or white space.
+pub fn check_bone_name(name: &str) -> std::result::Result<(), String> {
+    crate::camera::check_name(name)?;
+    if name.contains([',', '"']) || name.chars().any(char::is_whitespace) {
+        return Err(format!(
+            "the bone name {name:?} must not contain commas, quotes or white space (it is written into CSV and BVH files)"
+        ));
+    }
+    Ok(())
+}
+
 impl Skeleton {
     /// Number of pose parameters: 6 for the root, 3 for every other bone.
     pub fn parameter_count(&self) -> usize {
@@ -96,7 +108,7 @@ impl Skeleton {
         }
         let mut index: HashMap<&str, usize> = HashMap::new();
         for (i, e) in file.bones.iter().enumerate() {
-            crate::camera::check_name(&e.name).map_err(|m| bad(format!("bone {i}: {m}")))?;
+            check_bone_name(&e.name).map_err(|m| bad(format!("bone {i}: {m}")))?;
             if index.insert(&e.name, i).is_some() {
                 return Err(bad(format!("bone '{}' is declared twice", e.name)));
             }

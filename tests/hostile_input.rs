@@ -1,0 +1,246 @@
+//! Hostile and broken captures: names that would become paths outside the run are refused
+//! and nothing is written outside the run's folders; a PLY header claiming 4e9 vertices in a
+//! 1 KB file, a PNG header claiming 100000 x 100000 pixels and a 100 MB YAML are refused with
+//! clear errors while the process's peak memory stays under 100 MB (each case runs in a
+//! fresh child process that reports its VmHWM from /proc/self/status).
+
+mod common;
+
+use common::*;
+use std::path::Path;
+
+/// Every path under `dir`, relative.
+fn tree(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let rel = e.file_name().to_string_lossy().into_owned();
+        out.push(rel.clone());
+        if e.path().is_dir() {
+            out.extend(tree(&e.path()).into_iter().map(|r| format!("{rel}/{r}")));
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn camera_names_that_are_paths_are_refused_and_nothing_escapes() {
+    // As YAML double-quoted scalars.
+    for name in [
+        r#""../../escape""#,
+        r#""a/b""#,
+        "\"..\"",
+        r#""a\\b""#,
+        r#""bad\abell""#,
+    ] {
+        let outer = tempfile::tempdir().unwrap();
+        let run = outer.path().join("deep/run");
+        let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+        copy_tree(&repo.join("calib"), &run.join("calib"));
+        copy_tree(&repo.join("data"), &run.join("data"));
+        std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+        let calib = run.join("calib/cameras.yaml");
+        let text = std::fs::read_to_string(&calib).unwrap();
+        std::fs::write(
+            &calib,
+            text.replacen("name: cam00\n", &format!("name: {name}\n"), 1),
+        )
+        .unwrap();
+        assert_ne!(std::fs::read_to_string(&calib).unwrap(), text, "renamed");
+        let before = tree(outer.path());
+        for args in [
+            &["run", "pipeline.yaml"][..],
+            &["check", "pipeline.yaml"],
+            &["export", "pipeline.yaml"],
+            &["slurm", "pipeline.yaml"],
+        ] {
+            let (ok, _, err) = run_cli(args, &run);
+            assert!(!ok, "{name}: {args:?} must fail");
+            assert!(
+                err.contains("cameras.yaml") && err.contains("name"),
+                "{name}: {args:?}: {err}"
+            );
+            assert!(!err.contains("panicked"), "{err}");
+        }
+        assert_eq!(tree(outer.path()), before, "{name}: files appeared");
+    }
+}
+
+#[test]
+fn camera_names_equal_but_for_case_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cameras.yaml");
+    let cam = |name: &str| {
+        format!(
+            "  - name: {name}\n    width: 4\n    height: 3\n    K: [[2.0, 0.0, 1.5], [0.0, 2.0, 1.0], [0.0, 0.0, 1.0]]\n    R: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n    t: [0.0, 0.0, 1.0]\n"
+        )
+    };
+    std::fs::write(&path, format!("cameras:\n{}{}", cam("Cam0"), cam("cam0"))).unwrap();
+    let err = hullpose::camera::read_cameras(&path)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("cam0") && err.contains("case"), "{err}");
+}
+
+#[test]
+fn bone_names_that_break_files_are_refused() {
+    for bad in ["a,b", "a b", "../x", "\"q\""] {
+        let text = format!(
+            "reference_frame: 0\nbones:\n  - name: {bad:?}\n    parent: null\n    head: [0, 0, 0]\n    tail: [0, 0, 1]\n"
+        );
+        let err = hullpose::skeleton::Skeleton::parse(Path::new("skeleton.yaml"), &text)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("skeleton.yaml") && err.contains("bone"),
+            "{bad}: {err}"
+        );
+    }
+}
+
+/// Peak resident memory of this process, kB.
+fn peak_kb() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap()
+}
+
+/// CRC-32 (IEEE) of PNG chunks.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A PNG file whose header says `w` x `h` pixels (RGB, 8-bit) with a tiny body.
+fn png_claiming(w: u32, h: u32) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut chunk = |kind: &[u8], data: &[u8]| {
+        out.extend((data.len() as u32).to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend(data);
+        out.extend(&body);
+        out.extend(crc32(&body).to_be_bytes());
+    };
+    let mut ihdr = Vec::new();
+    ihdr.extend(w.to_be_bytes());
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 2, 0, 0, 0]);
+    chunk(b"IHDR", &ihdr);
+    chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
+    chunk(b"IEND", &[]);
+    out
+}
+
+/// One hostile case, run in this child process (selected by HULLPOSE_HOSTILE_CASE): the
+/// error text, then the peak memory.
+fn hostile_case(case: &str, dir: &Path) -> String {
+    match case {
+        "ply" => {
+            let path = dir.join("huge.ply");
+            let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
+            bytes.resize(1024, 0);
+            std::fs::write(&path, bytes).unwrap();
+            hullpose::geometry::ply::read_ply(&path)
+                .unwrap_err()
+                .to_string()
+        }
+        "png" => {
+            let side = 100_000;
+            std::fs::create_dir_all(dir.join("calib")).unwrap();
+            let calib = dir.join("calib/cameras.yaml");
+            std::fs::write(
+                &calib,
+                format!(
+                    "cameras:\n  - name: cam00\n    width: {side}\n    height: {side}\n    K: [[1000.0, 0.0, 50000.0], [0.0, 1000.0, 50000.0], [0.0, 0.0, 1.0]]\n    R: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n    t: [0.0, 0.0, 3.0]\n"
+                ),
+            )
+            .unwrap();
+            let frames = dir.join("seq/frames/cam00");
+            std::fs::create_dir_all(&frames).unwrap();
+            std::fs::write(frames.join("000000.png"), png_claiming(side, side)).unwrap();
+            let seq = hullpose::dataset::Sequence::open_with_calibration(&calib, &dir.join("seq"))
+                .unwrap();
+            seq.load_frame(0, 0).unwrap_err().to_string()
+        }
+        "yaml" => {
+            use std::io::Write;
+            let path = dir.join("pipeline.yaml");
+            let mut w = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+            w.write_all(b"calibration: calib/cameras.yaml\nsequence: seq\n")
+                .unwrap();
+            let filler = "# padding padding padding padding padding padding padding padding\n";
+            for _ in 0..(100 << 20) / filler.len() + 1 {
+                w.write_all(filler.as_bytes()).unwrap();
+            }
+            drop(w);
+            hullpose::config::Config::load(&path)
+                .unwrap_err()
+                .to_string()
+        }
+        other => panic!("unknown case {other}"),
+    }
+}
+
+/// The child side: runs the case named in the environment, prints its error and peak memory.
+#[test]
+fn hostile_case_child() {
+    let Ok(case) = std::env::var("HULLPOSE_HOSTILE_CASE") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let err = hostile_case(&case, dir.path());
+    println!("ERROR: {err}");
+    println!("PEAK_KB: {}", peak_kb());
+}
+
+#[test]
+fn huge_claims_are_refused_within_100_mb() {
+    for (case, expect) in [
+        ("ply", "header's element counts"),
+        ("png", "HULLPOSE_MAX_IMAGE_MEGAPIXELS"),
+        ("yaml", "HULLPOSE_MAX_TEXT_MB"),
+    ] {
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "hostile_case_child",
+                "--nocapture",
+                "--test-threads",
+                "1",
+            ])
+            .env("HULLPOSE_HOSTILE_CASE", case)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "{case}: {text}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let err = text
+            .lines()
+            .find_map(|l| l.split_once("ERROR: ").map(|x| x.1))
+            .unwrap_or_else(|| panic!("{case}: {text}"));
+        assert!(err.contains(expect), "{case}: {err}");
+        let peak: u64 = text
+            .lines()
+            .find_map(|l| l.split_once("PEAK_KB: ").map(|x| x.1))
+            .and_then(|v| v.trim().parse().ok())
+            .unwrap();
+        eprintln!("{case}: refused ({err}); peak memory {} MB", peak / 1024);
+        assert!(peak < 100 * 1024, "{case}: peak memory {peak} kB");
+    }
+}
