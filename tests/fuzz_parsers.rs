@@ -238,7 +238,7 @@ fn fuzz(name: &str, target: Target) {
     let dir = tempfile::tempdir().unwrap();
     let mut seen: HashSet<String> = HashSet::new();
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ name.len() as u64);
-    let mut run = |input: &[u8], seen: &mut HashSet<String>| -> bool {
+    let run = |input: &[u8], seen: &mut HashSet<String>| -> bool {
         let result = std::panic::catch_unwind(AssertUnwindSafe(|| target(input, dir.path())));
         match result {
             Ok(r) => {
