@@ -258,10 +258,13 @@ impl Sequence {
 
     /// The sequence name (its folder name).
     pub fn name(&self) -> String {
+        // The folder's own name (outputs are named after it): a plain file name, or
+        // `sequence` when the path ends in `..` or has no usable name.
         self.dir
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
+            .filter(|n| crate::camera::check_name(n).is_ok())
+            .unwrap_or_else(|| "sequence".into())
     }
 
     /// The frame a tracked frame `f` starts from: its neighbour nearer to t0 (none for t0
