@@ -107,6 +107,14 @@ pub struct FitParams {
     /// Frames whose observed surface has fewer vertices than this share of the model's keep
     /// the previous pose (and are flagged). Default 0.05.
     pub min_observed_share: f64,
+    /// When a tracked frame's fit from the previous pose hits the iteration cap or ends
+    /// with more than `restart_energy_ratio` times the previous frame's energy, it is fitted
+    /// again from two other starts (the constant-velocity prediction from the two previous
+    /// poses, and the reference pose at the previous root position) and the result with the
+    /// lowest energy (eq. 4) is kept. Default true.
+    pub restarts: bool,
+    /// See `restarts`. Default 3.
+    pub restart_energy_ratio: f64,
 }
 
 impl Default for FitParams {
@@ -124,6 +132,8 @@ impl Default for FitParams {
             sample_spacing: 0.01,
             tolerance: 0.00005,
             min_observed_share: 0.05,
+            restarts: true,
+            restart_energy_ratio: 3.0,
         }
     }
 }
@@ -155,6 +165,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         return Err(format!(
             "fit.tolerance must be a positive distance in metres, got {}",
             p.tolerance
+        ));
+    }
+    if !(p.restart_energy_ratio.is_finite() && p.restart_energy_ratio >= 1.0) {
+        return Err(format!(
+            "fit.restart_energy_ratio must be a number >= 1, got {}",
+            p.restart_energy_ratio
         ));
     }
     if !(0.0..1.0).contains(&p.min_observed_share) {
@@ -349,6 +365,58 @@ impl<'a> Fitter<'a> {
     }
 
     /// Fits one frame's `obs` starting from `start` (the previous frame's pose).
+    /// Fits a tracked frame: from `previous` (the neighbour's pose, nearer t0), and when
+    /// that fit looks lost (iteration cap, or energy above `restart_energy_ratio` times
+    /// `previous_energy`) also from the constant-velocity prediction (with `before`, the
+    /// pose one frame further back) and from the reference pose at the previous root
+    /// position; the lowest energy wins. `iterations` counts the rounds of every start.
+    pub fn fit_tracked(
+        &self,
+        obs: &Observation,
+        previous: &Pose,
+        before: Option<&Pose>,
+        previous_energy: Option<f64>,
+    ) -> FitResult {
+        let mut best = self.fit(obs, previous);
+        let p = &self.params;
+        let lost = best.diagnostics.status == FitStatus::IterationCap
+            || previous_energy
+                .is_some_and(|e| e > 0.0 && best.diagnostics.energy > p.restart_energy_ratio * e);
+        if !p.restarts || !lost {
+            return best;
+        }
+        let mut starts = Vec::new();
+        if let Some(before) = before {
+            // Apply the last frame-to-frame motion once more: L_pred = (L L_before⁻¹) L.
+            starts.push(Pose {
+                translation: previous.translation * 2.0 - before.translation,
+                rotations: previous
+                    .rotations
+                    .iter()
+                    .zip(&before.rotations)
+                    .map(|(l, lb)| (l * lb.inverse()) * l)
+                    .collect(),
+            });
+        }
+        let mut rest = Pose::rest(previous.rotations.len());
+        rest.translation = previous.translation;
+        starts.push(rest);
+        let (mut rounds, mut steps) = (best.diagnostics.iterations, best.diagnostics.lm_steps);
+        for start in &starts {
+            let r = self.fit(obs, start);
+            rounds += r.diagnostics.iterations;
+            steps += r.diagnostics.lm_steps;
+            if r.diagnostics.energy < best.diagnostics.energy
+                && r.diagnostics.status != FitStatus::NoObservation
+            {
+                best = r;
+            }
+        }
+        best.diagnostics.iterations = rounds;
+        best.diagnostics.lm_steps = steps;
+        best
+    }
+
     pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
         let p = &self.params;
         let model_vertices = self.model.mesh.vertices.len();

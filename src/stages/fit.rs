@@ -84,6 +84,18 @@ pub fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pos
         .ok_or_else(|| Error::invalid(&path, format!("holds no pose for frame {frame}")))
 }
 
+/// The final energy of a cached frame's fit (0 for the reference frame).
+fn cached_energy(ctx: &Context, frame: u32) -> Result<f64> {
+    let path = ctx.cache.stage_dir("fit").join(&files(frame)[2]);
+    let text = crate::fsutil::read_to_string(&path)?;
+    let rows = parse_diagnostics(&path, &text)?;
+    // The rest after status: iterations, lm_steps, energy, ...
+    rows.iter()
+        .find(|r| r.0 == frame)
+        .and_then(|r| r.2.split(',').nth(2).and_then(|e| e.parse::<f64>().ok()))
+        .ok_or_else(|| Error::invalid(&path, format!("holds no energy for frame {frame}")))
+}
+
 /// Tracks `frames` (in computation order, t0 first, as [`crate::runner::Job::tracked_frames`]
 /// gives them) with `params`, in memory: the fit stage's computation without its cache
 /// (the ablation runs every method this way over one cached reconstruction).
@@ -96,22 +108,26 @@ pub fn track(
     let model = super::model::load(ctx)?;
     let t0 = model.skeleton.reference_frame;
     let fitter = Fitter::new(&model, params.clone());
-    let mut done: std::collections::HashMap<u32, Pose> = Default::default();
+    let mut done: std::collections::HashMap<u32, (Pose, f64)> = Default::default();
     let mut out = Vec::with_capacity(frames.len());
     for &frame in frames {
         let obs = observation(ctx, frame)?;
         let result = if frame == t0 {
             fitter.reference(obs.vertices.len())
         } else {
-            let start = ctx
-                .sequence
-                .tracked_previous(frame, t0)
+            let seq = ctx.sequence;
+            let previous = seq.tracked_previous(frame, t0);
+            let (start, energy) = previous
                 .and_then(|f| done.get(&f))
                 .cloned()
-                .unwrap_or_else(|| Pose::rest(model.skeleton.bones.len()));
-            fitter.fit(&obs, &start)
+                .unwrap_or_else(|| (Pose::rest(model.skeleton.bones.len()), 0.0));
+            let before = previous
+                .and_then(|f| seq.tracked_previous(f, t0))
+                .and_then(|f| done.get(&f))
+                .map(|x| x.0.clone());
+            fitter.fit_tracked(&obs, &start, before.as_ref(), Some(energy))
         };
-        done.insert(frame, result.pose.clone());
+        done.insert(frame, (result.pose.clone(), result.diagnostics.energy));
         out.push((frame, result));
         progress(frame);
     }
@@ -127,15 +143,17 @@ pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
     let result: FitResult = if frame == t0 {
         fitter.reference(obs.vertices.len())
     } else {
-        let frames = &ctx.sequence.frames;
-        let i = frames.iter().position(|&f| f == frame).unwrap_or(0);
-        let previous = if frame > t0 {
-            frames[i - 1]
-        } else {
-            frames[i + 1]
-        };
+        let seq = ctx.sequence;
+        let previous = seq
+            .tracked_previous(frame, t0)
+            .ok_or_else(|| Error::Usage(format!("fit: frame {frame} has no tracked neighbour")))?;
         let start = cached_pose(ctx, &model.skeleton, previous)?;
-        fitter.fit(&obs, &start)
+        let before = match seq.tracked_previous(previous, t0) {
+            Some(f) => Some(cached_pose(ctx, &model.skeleton, f)?),
+            None => None,
+        };
+        let energy = cached_energy(ctx, previous)?;
+        fitter.fit_tracked(&obs, &start, before.as_ref(), Some(energy))
     };
     write_frame(ctx, &model, frame, &result)
 }
