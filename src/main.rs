@@ -322,12 +322,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             } else {
                 format
             };
-            let mut stages = vec!["visual_hull", "graphcut"];
-            if job.sequence.skeleton()?.is_some() {
-                stages.extend(["model", "fit"]);
-            }
-            job.require_cached(&stages)?;
-            let written = hullpose::export::run(&job.context(), &job.frames, &formats)?;
+            let written = hullpose::export::from_cache(&job, &formats)?;
             for w in &written.warnings {
                 eprintln!("warning: {w}");
             }

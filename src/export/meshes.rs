@@ -70,21 +70,21 @@ pub fn image_colours(
         .unzip()
 }
 
-/// One mesh with its attributes, written in each of `formats` (PLY, OBJ) at `stem` (no
-/// extension); returns the number of files.
+/// One mesh with its normals and attributes, written in each of `formats` (PLY, OBJ) at
+/// `stem` (no extension); returns the number of files.
 fn write_one(
     formats: &[Format],
     stem: &Path,
     mesh: &TriMesh,
+    normals: &[Vector3<f64>],
     colours: &[[u8; 3]],
     scalars: Vec<(&str, &[f32])>,
 ) -> Result<usize> {
-    let normals = mesh.vertex_normals();
     if formats.contains(&Format::Obj) {
         write_obj(
             &stem.with_extension("obj"),
             mesh,
-            Some(&normals),
+            Some(normals),
             Some(colours),
         )?;
     }
@@ -93,7 +93,7 @@ fn write_one(
             &stem.with_extension("ply"),
             mesh,
             &VertexAttributes {
-                normals: Some(&normals),
+                normals: Some(normals),
                 colors: Some(colours),
                 scalars,
             },
@@ -122,20 +122,20 @@ pub fn write(
     } else {
         None
     };
-    let part_colours = |m: &crate::skeleton::model::BodyModel| -> (Vec<[u8; 3]>, Vec<f32>) {
-        m.labels
-            .iter()
-            .map(|&l| (crate::stages::model::part_colour(l), l as f32))
-            .unzip()
-    };
+    // The model's part colours and part indices (its PLY quality), the same every frame.
+    let (part_colours, parts): (Vec<[u8; 3]>, Vec<f32>) = model
+        .iter()
+        .flat_map(|m| &m.labels)
+        .map(|&l| (crate::stages::model::part_colour(l), l as f32))
+        .unzip();
     let mut files = 0;
     if let Some(m) = &model {
-        let (colours, parts) = part_colours(m);
         files += write_one(
             formats,
             &dir.join("model"),
             &m.mesh,
-            &colours,
+            &m.mesh.vertex_normals(),
+            &part_colours,
             vec![("quality", &parts)],
         )?;
     }
@@ -149,28 +149,19 @@ pub fn write(
             .collect::<Result<_>>()?;
         let (ply, _) = hull_files(frame);
         let hull = read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
-        let (colours, seen) = image_colours(
-            &seq.cameras,
-            &images,
-            &hull,
-            &hull.vertex_normals(),
-            tolerance,
-        );
+        let normals = hull.vertex_normals();
+        let (colours, seen) = image_colours(&seq.cameras, &images, &hull, &normals, tolerance);
         files += write_one(
             formats,
             &dir.join("visual_hull").join(&stem),
             &hull,
+            &normals,
             &colours,
             vec![("quality", &seen)],
         )?;
         let refined = read_ply(&ctx.cache.stage_dir("graphcut").join(&ply))?;
-        let (colours, seen) = image_colours(
-            &seq.cameras,
-            &images,
-            &refined,
-            &refined.vertex_normals(),
-            tolerance,
-        );
+        let normals = refined.vertex_normals();
+        let (colours, seen) = image_colours(&seq.cameras, &images, &refined, &normals, tolerance);
         let observed = crate::stages::load_observed(ctx, frame)
             .ok()
             .filter(|o| o.vertices.len() == refined.vertices.len());
@@ -187,17 +178,19 @@ pub fn write(
             formats,
             &dir.join("graphcut").join(&stem),
             &refined,
+            &normals,
             &colours,
             scalars,
         )?;
         if let Some(m) = &model {
             let pose = crate::stages::fit::cached_pose(ctx, &m.skeleton, frame)?;
-            let (colours, parts) = part_colours(m);
+            let posed = m.pose(&pose);
             files += write_one(
                 formats,
                 &dir.join("fit").join(&stem),
-                &m.pose(&pose),
-                &colours,
+                &posed,
+                &posed.vertex_normals(),
+                &part_colours,
                 vec![("quality", &parts)],
             )?;
         }

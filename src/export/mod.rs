@@ -17,7 +17,7 @@ pub mod overlays;
 use crate::error::{Error, Result};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::Pose;
-use crate::stages::Context;
+use crate::stages::{Context, Finished};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -102,17 +102,6 @@ pub fn validate(p: &ExportParams) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// What an export wrote.
-#[derive(Debug, Default)]
-pub struct Written {
-    /// Files or folders, for the summary.
-    pub outputs: Vec<PathBuf>,
-    /// Number of files written.
-    pub files: usize,
-    /// Things the user should know (e.g. no skeleton, so no motion).
-    pub warnings: Vec<String>,
-}
-
 /// The export folder of a job.
 pub fn folder(job_output: &std::path::Path) -> PathBuf {
     job_output.join("export")
@@ -131,10 +120,21 @@ pub fn load_motion(ctx: &Context, frames: &[u32]) -> Result<(BodyModel, Vec<(u32
     Ok((model, poses))
 }
 
+/// `pipeline export`: checks that the cache holds what the exports read, up to date for the
+/// job's frames (else an error says what to run), then writes `formats`.
+pub fn from_cache(job: &crate::runner::Job, formats: &[Format]) -> Result<Finished> {
+    let mut stages = vec!["visual_hull", "graphcut"];
+    if job.sequence.skeleton()?.is_some() {
+        stages.extend(["model", "fit"]);
+    }
+    job.require_cached(&stages)?;
+    run(&job.context(), &job.frames, formats)
+}
+
 /// Writes `formats` for `frames` from the cache (which must hold them: the export stage runs
-/// after the stages it reads, and `pipeline export` checks first).
-pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Written> {
-    let mut written = Written::default();
+/// after the stages it reads, and [`from_cache`] checks first).
+pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished> {
+    let mut written = Finished::default();
     let has_skeleton = ctx.sequence.skeleton()?.is_some();
     let out = folder(&ctx.config.output);
     let p = &ctx.config.export;
@@ -154,6 +154,23 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Written>
         None
     };
     let name = ctx.sequence.name();
+    // PLY and OBJ are written in one pass (the colours are computed once per mesh).
+    let mesh_formats: Vec<Format> = formats
+        .iter()
+        .copied()
+        .filter(|f| matches!(f, Format::Ply | Format::Obj))
+        .collect();
+    if !mesh_formats.is_empty() {
+        let n = meshes::write(
+            ctx,
+            frames,
+            &mesh_formats,
+            &out.join("meshes"),
+            has_skeleton,
+        )?;
+        written.outputs.push(out.join("meshes"));
+        written.files += n;
+    }
     for &format in &formats {
         match format {
             Format::Glb => {
@@ -174,26 +191,7 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Written>
                 written.outputs.push(path);
                 written.files += 1;
             }
-            Format::Ply | Format::Obj => {
-                // Both mesh formats in one pass (the colours are computed once).
-                if format == Format::Obj && formats.contains(&Format::Ply) {
-                    continue;
-                }
-                let mesh_formats: Vec<Format> = formats
-                    .iter()
-                    .copied()
-                    .filter(|f| matches!(f, Format::Ply | Format::Obj))
-                    .collect();
-                let n = meshes::write(
-                    ctx,
-                    frames,
-                    &mesh_formats,
-                    &out.join("meshes"),
-                    has_skeleton,
-                )?;
-                written.outputs.push(out.join("meshes"));
-                written.files += n;
-            }
+            Format::Ply | Format::Obj => {}
             Format::Overlay => {
                 let (model, poses) = motion.as_ref().expect("loaded");
                 let n = overlays::write(ctx, model, poses, &out.join("overlays"))?;

@@ -181,12 +181,7 @@ pub const STAGES: &[StageDef] = &[
 
 /// The export stage: every format `export.formats` lists, for the selected frames.
 fn export_finish(ctx: &Context, frames: &[u32]) -> Result<Finished> {
-    let w = crate::export::run(ctx, frames, &ctx.config.export.formats)?;
-    Ok(Finished {
-        outputs: w.outputs,
-        files: w.files,
-        warnings: w.warnings,
-    })
+    crate::export::run(ctx, frames, &ctx.config.export.formats)
 }
 
 /// The stage named `name`, or an error listing the stages.
