@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 fn pristine() -> &'static Path {
     static CELL: OnceLock<tempfile::TempDir> = OnceLock::new();
     CELL.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = process_tempdir();
         let mut o = SynthOptions::new(SceneKind::Tripod, dir.path());
         (o.cameras, o.width, o.height, o.frames) = (3, 80, 60, Some(2));
         o.mesh_spacing = 0.03;

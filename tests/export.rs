@@ -23,13 +23,17 @@ use std::sync::OnceLock;
 fn sample_run() -> &'static Path {
     static CELL: OnceLock<tempfile::TempDir> = OnceLock::new();
     CELL.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = process_tempdir();
         let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
         copy_tree(&repo.join("calib"), &dir.path().join("calib"));
         copy_tree(&repo.join("data"), &dir.path().join("data"));
         let yaml = std::fs::read_to_string(repo.join("pipeline.yaml"))
             .unwrap()
-            .replace("frames: all", "frames: 0..2");
+            .replace("frames: all", "frames: 0..2")
+            .replace(
+                "export:\n",
+                "export:\n  formats: [glb, bvh, ply, obj, overlay]\n",
+            );
         assert!(
             yaml.contains("up_axis: +z"),
             "the sample declares its up axis"

@@ -13,9 +13,9 @@ use std::sync::OnceLock;
 fn run_tripod() -> &'static (tempfile::TempDir, String) {
     static CELL: OnceLock<(tempfile::TempDir, String)> = OnceLock::new();
     CELL.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = process_tempdir();
         hullpose::synth::generate(&SynthOptions::new(SceneKind::Tripod, dir.path())).unwrap();
-        let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], dir.path());
+        let (ok, out, err) = run_cli(&["run", "pipeline.yaml", "--until", "fit"], dir.path());
         assert!(ok, "{err}");
         eprintln!("{out}");
         let (ok, out, err) = run_cli(&["evaluate", "pipeline.yaml"], dir.path());

@@ -59,7 +59,8 @@ impl Format {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ExportParams {
-    /// What `pipeline run` exports after the fit.
+    /// What `pipeline run` exports after the fit (default: every format but OBJ, which
+    /// holds the same meshes as the PLY files at three times their size).
     pub formats: Vec<Format>,
     /// Capture frame rate, frames per second: the animation's timing (glb, bvh).
     pub frame_rate: f64,
@@ -79,7 +80,7 @@ pub struct ExportParams {
 impl Default for ExportParams {
     fn default() -> Self {
         ExportParams {
-            formats: Format::ALL.to_vec(),
+            formats: vec![Format::Glb, Format::Bvh, Format::Ply, Format::Overlay],
             frame_rate: 25.0,
             up_axis: None,
             bvh_rotation_order: "ZXY".into(),

@@ -26,7 +26,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 /// The export settings of a synthetic capture's pipeline.yaml: its world stands on +z.
-const SYNTH_EXPORT_YAML: &str = "# exports (glb, bvh, ply, obj, overlay) after the fit, under output/export/\n\
+const SYNTH_EXPORT_YAML: &str = "# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
 export:\n  up_axis: +z        # the synthetic captures stand on +z; glb and bvh turn it to +Y\n  frame_rate: 25\n";
 
 /// Which scene to make.

@@ -6,26 +6,59 @@ use hullpose::camera::Camera;
 use hullpose::geometry::TriMesh;
 use hullpose::synth::{SceneKind, SynthOptions};
 use nalgebra::{Vector2, Vector3};
+use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
-/// A dataset written once per test binary into a temporary folder that lives as long as
-/// the process.
+/// A synthetic dataset shared by every test binary of one build: written once under
+/// Cargo's per-build scratch folder (`CARGO_TARGET_TMPDIR`), so the suite keeps one copy of
+/// each on disk instead of one per test process.
 pub struct Made {
     pub root: PathBuf,
-    _dir: tempfile::TempDir,
 }
 
+/// Writes the dataset into a fresh folder beside its final place and renames it there, so a
+/// concurrent or interrupted test process never sees half a dataset.
 fn make(scene: SceneKind, width: u32, height: u32) -> Made {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let mut opts = SynthOptions::new(scene, dir.path());
-    opts.width = width;
-    opts.height = height;
-    hullpose::synth::generate(&opts).expect("synthesis");
-    Made {
-        root: dir.path().to_path_buf(),
-        _dir: dir,
+    let base = Path::new(env!("CARGO_TARGET_TMPDIR")).join("datasets");
+    std::fs::create_dir_all(&base).expect("scratch folder");
+    let name = format!("{scene:?}-{width}x{height}-");
+    let root = base.join(format!("{name}{:016x}", source_hash()));
+    if !root.join("pipeline.yaml").exists() {
+        // Copies made by older sources are stale.
+        for e in std::fs::read_dir(&base).into_iter().flatten().flatten() {
+            if e.file_name().to_string_lossy().starts_with(&name) {
+                let _ = std::fs::remove_dir_all(e.path());
+            }
+        }
+        let fresh = tempfile::tempdir_in(&base).expect("temp dir");
+        let mut opts = SynthOptions::new(scene, fresh.path());
+        opts.width = width;
+        opts.height = height;
+        hullpose::synth::generate(&opts).expect("synthesis");
+        // Losing the race to another process is fine: its copy is identical.
+        let _ = std::fs::rename(fresh.keep(), &root);
     }
+    Made { root }
+}
+
+/// A hash of the crate's sources: a shared dataset is rewritten whenever they change.
+fn source_hash() -> u64 {
+    fn visit(dir: &Path, h: &mut std::collections::hash_map::DefaultHasher) {
+        let mut entries: Vec<_> = std::fs::read_dir(dir).unwrap().flatten().collect();
+        entries.sort_by_key(|e| e.file_name());
+        for e in entries {
+            if e.path().is_dir() {
+                visit(&e.path(), h);
+            } else {
+                e.file_name().hash(h);
+                std::fs::read(e.path()).unwrap().hash(h);
+            }
+        }
+    }
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    visit(&Path::new(env!("CARGO_MANIFEST_DIR")).join("src"), &mut h);
+    h.finish()
 }
 
 /// The tripod at the paper's 15 cameras, 512x384 (every test of one binary shares it).
@@ -38,6 +71,31 @@ pub fn tripod() -> &'static Made {
 pub fn humanoid() -> &'static Made {
     static CELL: OnceLock<Made> = OnceLock::new();
     CELL.get_or_init(|| make(SceneKind::Humanoid, 384, 288))
+}
+
+/// Folders to delete when the test process exits (Rust never drops `static`s, so a
+/// `TempDir` kept in one would otherwise stay on disk).
+static AT_EXIT: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+extern "C" fn remove_registered_dirs() {
+    if let Ok(dirs) = AT_EXIT.lock() {
+        for d in dirs.iter() {
+            let _ = std::fs::remove_dir_all(d);
+        }
+    }
+}
+
+/// A temporary folder for a `static` shared by the tests of one binary: removed when the
+/// process exits, whether the tests passed or not.
+pub fn process_tempdir() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut dirs = AT_EXIT.lock().unwrap();
+    if dirs.is_empty() {
+        // SAFETY: registers a plain function with the C runtime; it runs once at exit.
+        unsafe { libc::atexit(remove_registered_dirs) };
+    }
+    dirs.push(dir.path().to_path_buf());
+    dir
 }
 
 /// A voxel grid over a box: `dims` voxels of `size` metres from `lo` (voxel centres at
