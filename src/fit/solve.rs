@@ -59,52 +59,55 @@ impl HeldProblem<'_> {
     fn normal_equations(&self, pose: &Pose) -> (DMatrix<f64>, DVector<f64>, f64) {
         let bones = PosedBones::new(self.skeleton, pose);
         let n = pose.parameter_count();
-        let zero = || (vec![0.0; n * n], vec![0.0; n], 0.0, Vec::new());
+        let zero = || Accumulator {
+            h: vec![0.0; n * n],
+            g: vec![0.0; n],
+            e: 0.0,
+            blocks: Vec::new(),
+            cols: Vec::new(),
+        };
         // Per fixed chunk, then summed in order (deterministic, see `energy`).
-        let partials: Vec<(Vec<f64>, Vec<f64>, f64, Vec<_>)> = self
+        let partials: Vec<Accumulator> = self
             .targets
             .pulls
             .par_chunks(CHUNK)
             .map(|chunk| {
-                chunk
-                    .iter()
-                    .fold(zero(), |(mut h, mut g, mut e, mut blocks), &(v, w, c)| {
-                        let v = v as usize;
-                        let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
-                        let r = y - c;
-                        e += w * r.norm_squared();
-                        sparse_vertex_jacobian(
-                            &bones,
-                            &self.rest[v],
-                            &self.weights[v],
-                            &mut blocks,
-                        );
-                        // Columns: the translation's identity, then each block's three.
-                        let mut cols: Vec<(usize, Vector3<f64>)> =
-                            Vec::with_capacity(3 + 3 * blocks.len());
-                        for k in 0..3 {
-                            cols.push((k, Vector3::ith(k, 1.0)));
+                chunk.iter().fold(zero(), |mut acc, &(v, w, c)| {
+                    let v = v as usize;
+                    let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
+                    let r = y - c;
+                    acc.e += w * r.norm_squared();
+                    sparse_vertex_jacobian(
+                        &bones,
+                        &self.rest[v],
+                        &self.weights[v],
+                        &mut acc.blocks,
+                    );
+                    // Columns: the translation's identity, then each block's three.
+                    acc.cols.clear();
+                    for k in 0..3 {
+                        acc.cols.push((k, Vector3::ith(k, 1.0)));
+                    }
+                    for (b, c3) in &acc.blocks {
+                        for (k, col) in c3.iter().enumerate() {
+                            acc.cols.push((3 + 3 * b + k, *col));
                         }
-                        for (b, c3) in &blocks {
-                            for (k, col) in c3.iter().enumerate() {
-                                cols.push((3 + 3 * b + k, *col));
-                            }
+                    }
+                    for (i, (pi, ci)) in acc.cols.iter().enumerate() {
+                        acc.g[*pi] += w * ci.dot(&r);
+                        for (pj, cj) in &acc.cols[i..] {
+                            acc.h[pi * n + pj] += w * ci.dot(cj);
                         }
-                        for (i, (pi, ci)) in cols.iter().enumerate() {
-                            g[*pi] += w * ci.dot(&r);
-                            for (pj, cj) in &cols[i..] {
-                                let x = w * ci.dot(cj);
-                                h[pi * n + pj] += x;
-                            }
-                        }
-                        (h, g, e, blocks)
-                    })
+                    }
+                    acc
+                })
             })
             .collect();
-        let (h, g, e, _) = partials.into_iter().fold(zero(), |mut a, b| {
-            a.0.iter_mut().zip(&b.0).for_each(|(x, y)| *x += y);
-            a.1.iter_mut().zip(&b.1).for_each(|(x, y)| *x += y);
-            (a.0, a.1, a.2 + b.2, a.3)
+        let Accumulator { h, g, e, .. } = partials.into_iter().fold(zero(), |mut a, b| {
+            a.h.iter_mut().zip(&b.h).for_each(|(x, y)| *x += y);
+            a.g.iter_mut().zip(&b.g).for_each(|(x, y)| *x += y);
+            a.e += b.e;
+            a
         });
         // Only one triangle of each pair (i, j) was summed, in the order the columns came;
         // fold both triangles into a symmetric matrix.
@@ -118,6 +121,16 @@ impl HeldProblem<'_> {
         }
         (hm, DVector::from_vec(g), e)
     }
+}
+
+/// One chunk's share of the normal equations, with scratch space reused vertex to vertex.
+struct Accumulator {
+    /// H, row-major, one triangle summed (see `normal_equations`).
+    h: Vec<f64>,
+    g: Vec<f64>,
+    e: f64,
+    blocks: Vec<(usize, [Vector3<f64>; 3])>,
+    cols: Vec<(usize, Vector3<f64>)>,
 }
 
 /// How a run of LM steps went.
