@@ -4,7 +4,8 @@
 1. scipy's cKDTree on the same points as `pipeline bench nearest` (a Fibonacci lattice of
    100k points on a 0.5 m sphere, 1M queries on a 0.51 m sphere), one worker and all.
 2. One Open3D point-to-point rigid ICP iteration on two 50k-point clouds (when open3d is
-   installed: pip install open3d), the yardstick for one articulated fit round.
+   installed: pip install open3d, and Debian's libusb-1.0-0 for it to import), the
+   yardstick for one articulated fit round.
 
 usage: python3 tools/bench_fit.py [--points 100000] [--queries 1000000]
 """
