@@ -129,9 +129,8 @@ pub struct FitParams {
     /// When a tracked frame's fit from its start hits the iteration cap or ends with more
     /// than `restart_energy_ratio` times the previous frame's energy, it is fitted again
     /// from two other starts (the other of `previous` and `predicted`, and the reference
-    /// pose at the previous root position) and the result with the
-    /// lowest score is kept (eq. 4 weighted by rho_p alone, [`FitDiagnostics::score`]).
-    /// Default true.
+    /// pose at the previous root position) and the result with the lowest score is kept
+    /// (eq. 4 weighted by rho_p alone, [`Fitter::score`]). Default true.
     pub restarts: bool,
     /// See `restarts`. Default 3.
     pub restart_energy_ratio: f64,
@@ -260,10 +259,6 @@ pub struct FitDiagnostics {
     /// Paper eq. 4 at the final pose with the final pairs (weights normalized by R_c R_p,
     /// m^2).
     pub energy: f64,
-    /// The fit's score, comparable between starts of one frame: eq. 4 with rho_p alone
-    /// (the observed surface's reliability does not depend on the pose, so a start cannot
-    /// lower it by pressing parts together the way it can lower rho_c), m^2.
-    pub score: f64,
     /// Weighted root-mean-square pair distance at the end, metres.
     pub rms: f64,
     /// Share of pairs (both directions) weighing less than 0.5.
@@ -282,7 +277,6 @@ impl FitDiagnostics {
             iterations: 0,
             lm_steps: 0,
             energy: 0.0,
-            score: 0.0,
             rms: 0.0,
             downweighted_share: 0.0,
             contact_share: 0.0,
@@ -309,6 +303,15 @@ pub struct Fitter<'a> {
     contact: ContactSearch,
     /// Seconds spent per step, summed over every fit (for benchmarks).
     timings: std::sync::Mutex<Vec<(&'static str, f64)>>,
+}
+
+/// A frame's observation prepared for the rounds ([`Fitter::prepare`]).
+struct Prepared {
+    /// Finite observed vertices thinned to `sample_spacing`.
+    obs: Observation,
+    tree: NearestTree,
+    /// Observed vertices before thinning (for the diagnostics).
+    observed: usize,
 }
 
 /// Everything one round's pairs give: the held targets and the energy's bookkeeping.
@@ -390,13 +393,12 @@ impl<'a> Fitter<'a> {
         }
     }
 
-    /// Fits one frame's `obs` starting from `start` (the previous frame's pose).
     /// Fits a tracked frame from the start `params.start` chooses (`previous` is the
     /// neighbour's pose, nearer t0; `before` the pose one frame further back), and when that
     /// fit looks lost (iteration cap, or energy above `restart_energy_ratio` times
     /// `previous_energy`) also from the other of the two and from the reference pose at the
-    /// previous root position; the lowest score ([`FitDiagnostics::score`]) wins.
-    /// `iterations` counts the rounds of every start.
+    /// previous root position; the lowest [`Fitter::score`] wins. `iterations` counts the
+    /// rounds of every start. A frame without enough observation keeps `previous`.
     pub fn fit_tracked(
         &self,
         obs: &Observation,
@@ -405,6 +407,9 @@ impl<'a> Fitter<'a> {
         previous_energy: Option<f64>,
     ) -> FitResult {
         let p = &self.params;
+        let Some(prepared) = self.prepare(obs) else {
+            return self.unobserved(obs, previous);
+        };
         // Apply the last frame-to-frame motion once more: L_pred = (L L_before⁻¹) L.
         let predicted = before.map(|before| Pose {
             translation: previous.translation * 2.0 - before.translation,
@@ -419,7 +424,7 @@ impl<'a> Fitter<'a> {
             (Some(pred), Start::Predicted) => (pred.clone(), Some(previous.clone())),
             _ => (previous.clone(), predicted.clone()),
         };
-        let mut best = self.fit(obs, &first);
+        let mut best = self.fit_prepared(&prepared, &first);
         let lost = best.diagnostics.status == FitStatus::IterationCap
             || previous_energy
                 .is_some_and(|e| e > 0.0 && best.diagnostics.energy > p.restart_energy_ratio * e);
@@ -431,14 +436,14 @@ impl<'a> Fitter<'a> {
         rest.translation = previous.translation;
         starts.push(rest);
         let (mut rounds, mut steps) = (best.diagnostics.iterations, best.diagnostics.lm_steps);
+        let mut best_score = self.score(&prepared, &best.pose);
         for start in &starts {
-            let r = self.fit(obs, start);
+            let r = self.fit_prepared(&prepared, start);
             rounds += r.diagnostics.iterations;
             steps += r.diagnostics.lm_steps;
-            if r.diagnostics.score < best.diagnostics.score
-                && r.diagnostics.status != FitStatus::NoObservation
-            {
-                best = r;
+            let score = self.score(&prepared, &r.pose);
+            if score < best_score {
+                (best, best_score) = (r, score);
             }
         }
         best.diagnostics.iterations = rounds;
@@ -446,18 +451,32 @@ impl<'a> Fitter<'a> {
         best
     }
 
-    pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
+    /// A fit's score, comparable between starts of one frame, m^2: eq. 4 weighted by rho_p
+    /// alone. The observed surface's reliability does not depend on the pose, so a start
+    /// cannot lower the score by pressing parts together, as it can lower eq. 4 through
+    /// rho_c (on the humanoid, choosing by eq. 4 picked a pose 5 cm off at t23).
+    fn score(&self, prepared: &Prepared, pose: &Pose) -> f64 {
+        self.round(Method::RhoP, &prepared.obs, &prepared.tree, pose)
+            .energy()
+    }
+
+    /// The result for a frame with too little usable observation: `pose` kept, flagged.
+    fn unobserved(&self, obs: &Observation, pose: &Pose) -> FitResult {
+        FitResult {
+            pose: pose.clone(),
+            diagnostics: FitDiagnostics::unfitted(FitStatus::NoObservation, obs.vertices.len()),
+        }
+    }
+
+    /// The frame's observation as the rounds use it: finite vertices only, thinned to
+    /// `sample_spacing`, with its k-d tree; `None` when too little of it is left.
+    fn prepare(&self, obs: &Observation) -> Option<Prepared> {
         let p = &self.params;
         let model_vertices = self.model.mesh.vertices.len();
-        let mut diagnostics =
-            FitDiagnostics::unfitted(FitStatus::NoObservation, obs.vertices.len());
         if obs.vertices.is_empty()
             || (obs.vertices.len() as f64) < p.min_observed_share * model_vertices as f64
         {
-            return FitResult {
-                pose: start.clone(),
-                diagnostics,
-            };
+            return None;
         }
         // Non-finite observations (a damaged cache, a hostile file) are dropped, never
         // fitted: NaN must not reach a pose.
@@ -475,23 +494,40 @@ impl<'a> Fitter<'a> {
             .into_iter()
             .map(|k| finite[k])
             .collect();
-        let obs = &Observation {
+        if keep.is_empty() {
+            return None;
+        }
+        let input_count = obs.vertices.len();
+        let obs = Observation {
             vertices: keep.iter().map(|&i| obs.vertices[i]).collect(),
             normals: keep.iter().map(|&i| obs.normals[i]).collect(),
             rho_p: keep.iter().map(|&i| obs.rho_p[i]).collect(),
         };
-        if obs.vertices.is_empty() {
-            return FitResult {
-                pose: start.clone(),
-                diagnostics,
-            };
+        let tree = NearestTree::new(&obs.vertices);
+        Some(Prepared {
+            observed: input_count,
+            obs,
+            tree,
+        })
+    }
+
+    /// Fits one frame's `obs` starting from `start`; a frame without enough observation
+    /// keeps `start`.
+    pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
+        match self.prepare(obs) {
+            Some(prepared) => self.fit_prepared(&prepared, start),
+            None => self.unobserved(obs, start),
         }
-        let obs_tree = NearestTree::new(&obs.vertices);
+    }
+
+    fn fit_prepared(&self, prepared: &Prepared, start: &Pose) -> FitResult {
+        let p = &self.params;
+        let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
+        let mut diagnostics = FitDiagnostics::unfitted(FitStatus::IterationCap, prepared.observed);
         let mut pose = start.clone();
-        let mut round = self.round(p.method, obs, &obs_tree, &pose);
+        let mut round = self.round(p.method, obs, obs_tree, &pose);
         let mut lambda = 1e-3;
         let mut accel = anderson::Anderson::new(p.acceleration);
-        diagnostics.status = FitStatus::IterationCap;
         while diagnostics.iterations < p.max_iterations {
             let problem = HeldProblem {
                 skeleton: &self.sample.skeleton,
@@ -512,7 +548,7 @@ impl<'a> Fitter<'a> {
             if let Some(extrapolated) = accel.next(&pose.to_vector(), &stepped.to_vector()) {
                 let candidate = Pose::from_vector(&extrapolated);
                 if candidate.is_finite() {
-                    let r = self.round(p.method, obs, &obs_tree, &candidate);
+                    let r = self.round(p.method, obs, obs_tree, &candidate);
                     if r.energy() < round.energy() {
                         next = candidate;
                         next_round = Some(r);
@@ -522,7 +558,7 @@ impl<'a> Fitter<'a> {
                 }
             }
             let next_round =
-                next_round.unwrap_or_else(|| self.round(p.method, obs, &obs_tree, &next));
+                next_round.unwrap_or_else(|| self.round(p.method, obs, obs_tree, &next));
             let moved = joint_motion(self.model, &pose, &next);
             pose = next;
             round = next_round;
@@ -533,7 +569,6 @@ impl<'a> Fitter<'a> {
         }
         // The energy and shares at the final pose, with its own pairs.
         diagnostics.energy = round.energy();
-        diagnostics.score = self.round(Method::RhoP, obs, &obs_tree, &pose).energy();
         diagnostics.rms = (round.weighted_sq / round.weight_sum.max(1e-300)).sqrt();
         diagnostics.downweighted_share = round.downweighted as f64 / round.pairs.max(1) as f64;
         diagnostics.contact_share = round.contact_share;

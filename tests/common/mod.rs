@@ -36,8 +36,9 @@ fn make(scene: SceneKind, width: u32, height: u32) -> Made {
         opts.width = width;
         opts.height = height;
         hullpose::synth::generate(&opts).expect("synthesis");
-        // Losing the race to another process is fine: its copy is identical.
-        let _ = std::fs::rename(fresh.keep(), &root);
+        // Losing the race to another process is fine: its copy is identical, and ours is
+        // removed with `fresh`.
+        let _ = std::fs::rename(fresh.path(), &root);
     }
     Made { root }
 }
