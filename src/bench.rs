@@ -107,7 +107,8 @@ pub fn meshing(n: usize, repeat: usize) -> String {
     )
 }
 
-/// Times building and solving the max-flow fixture graph of size n^3.
+/// Times building and solving the max-flow fixture graph of size n^3, with the threads
+/// rayon has and on one thread.
 pub fn maxflow_fixture(n: usize) -> String {
     let t = Instant::now();
     let mut g = crate::maxflow::fixture::fixture_graph(n);
@@ -118,7 +119,19 @@ pub fn maxflow_fixture(n: usize) -> String {
     let sink_side = (0..g.node_count())
         .filter(|&i| !g.is_source_side(i))
         .count();
-    format!("maxflow fixture n={n}: flow {flow}, build {build:.3} s, solve {solve:.3} s, sink side {sink_side} nodes\n")
+    let mut serial = crate::maxflow::fixture::fixture_graph(n);
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build();
+    let t = Instant::now();
+    let serial_flow = match one_thread {
+        Ok(pool) => pool.install(|| serial.maxflow()),
+        Err(_) => serial.maxflow(),
+    };
+    let solve_serial = t.elapsed().as_secs_f64();
+    assert_eq!(flow, serial_flow, "the same flow on any number of threads");
+    format!(
+        "maxflow fixture n={n}: flow {flow}, build {build:.3} s, solve {solve:.3} s on {} threads, {solve_serial:.3} s on 1 thread, sink side {sink_side} nodes\n",
+        rayon::current_num_threads()
+    )
 }
 
 /// Times the graph-cut stage's steps on one frame (needs its hull in the cache).

@@ -46,6 +46,8 @@ sizes = [int(a) for a in sys.argv[1:]] or [16, 32, 64]
 for n in sizes:
     flow, b, sv = pymaxflow(n)
     ours = subprocess.run([exe, "bench", "maxflow", "--size", str(n)], check=True, capture_output=True, text=True).stdout.split()
-    of, ob, osv = float(ours[4].rstrip(",")), float(ours[6]), float(ours[9])
-    print(f"n={n}: PyMaxflow flow {flow} build {b:.3f} s solve {sv:.3f} s | hullpose flow {of:.0f} build {ob:.3f} s solve {osv:.3f} s "
-          f"| solve ratio {sv / osv:.2f}x, total ratio {(b + sv) / (ob + osv):.2f}x")
+    of, ob, osv, threads, one = float(ours[4].rstrip(",")), float(ours[6]), float(ours[9]), ours[12], float(ours[14])
+    assert of == flow, f"n={n}: flows differ ({of} vs {flow})"
+    print(f"n={n}: PyMaxflow flow {flow} build {b:.3f} s solve {sv:.3f} s | hullpose flow {of:.0f} build {ob:.3f} s "
+          f"solve {osv:.3f} s on {threads} threads, {one:.3f} s on 1 thread "
+          f"| solve ratio {sv / osv:.2f}x ({sv / one:.2f}x on 1 thread), total ratio {(b + sv) / (ob + osv):.2f}x")

@@ -1,15 +1,17 @@
 //! The reference grid graphs of `shared/fixtures/maxflow` (defined by a formula there), for
 //! tests and benchmarks against PyMaxflow.
 
-use super::Graph;
+use super::GridGraph;
 
-/// The fixture graph of shared/fixtures/maxflow for size n (see its README).
-pub fn fixture_graph(n: usize) -> Graph {
-    fn splitmix64(k: u64) -> u64 {
-        crate::synth::rng::mix64(k)
-    }
+/// Visits the fixture graph of size n: `edge(i, axis, w)` for the edge of capacity `w` (both
+/// ways) between node i and its neighbour along +axis, `terminals(i, source, sink)` for
+/// every node. Node (x, y, z) is i = x + n (y + n z).
+fn visit(
+    n: usize,
+    mut edge: impl FnMut(usize, usize, f32),
+    mut terminals: impl FnMut(usize, f64, f64),
+) {
     let idx = |x: usize, y: usize, z: usize| x + n * (y + n * z);
-    let mut g = Graph::new(n * n * n);
     let rd = (6 * n as i64) / 10;
     for z in 0..n {
         for y in 0..n {
@@ -22,13 +24,11 @@ pub fn fixture_graph(n: usize) -> Graph {
                 );
                 let s = dx * dx + dy * dy + dz * dz;
                 let field = (s - rd * rd).abs() / n as i64;
-                for (a, (nx, ny, nz)) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)]
-                    .into_iter()
-                    .enumerate()
-                {
-                    if nx < n && ny < n && nz < n {
-                        let w = 1 + field.min(200) as u64 + splitmix64(3 * i as u64 + a as u64) % 8;
-                        g.add_edge(i, idx(nx, ny, nz), w as f32, w as f32);
+                for (a, c) in [x, y, z].into_iter().enumerate() {
+                    if c + 1 < n {
+                        let hash = crate::synth::rng::mix64(3 * i as u64 + a as u64);
+                        let w = 1 + field.min(200) as u64 + hash % 8;
+                        edge(i, a, w as f32);
                     }
                 }
                 let border = [x, y, z].iter().any(|&c| c == 0 || c == n - 1);
@@ -39,9 +39,20 @@ pub fn fixture_graph(n: usize) -> Graph {
                     } else {
                         0.0
                     };
-                g.add_terminal_weights(i, source, sink);
+                terminals(i, source, sink);
             }
         }
     }
+}
+
+/// The fixture graph of shared/fixtures/maxflow for size n (see its README).
+pub fn fixture_graph(n: usize) -> GridGraph {
+    let mut g = GridGraph::new([n, n, n]);
+    let g_ref = std::cell::RefCell::new(&mut g);
+    visit(
+        n,
+        |i, a, w| g_ref.borrow_mut().set_edge(i, a, w, w),
+        |i, s, t| g_ref.borrow_mut().add_terminal_weights(i, s, t),
+    );
     g
 }

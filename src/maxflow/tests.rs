@@ -83,43 +83,65 @@ fn edmonds_karp(cap: &[Vec<f64>], s: usize, t: usize) -> f64 {
     }
 }
 
-#[test]
-fn random_graphs_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
-    let mut rng = crate::synth::rng::Rng::new(42, 0);
-    for trial in 0..300 {
-        let n = 2 + (rng.next_u64() % 12) as usize;
-        // Dense reference: nodes 0..n, source n, sink n + 1. Integer capacities.
-        let mut cap = vec![vec![0.0; n + 2]; n + 2];
-        let mut g = Graph::new(n);
-        let edges = rng.next_u64() % (3 * n as u64 + 1);
-        for _ in 0..edges {
-            let (i, j) = (
-                (rng.next_u64() % n as u64) as usize,
-                (rng.next_u64() % n as u64) as usize,
-            );
-            if i == j {
-                continue;
+/// One random grid graph (integer capacities, some zero) beside its dense capacity matrix
+/// (nodes 0..n, source n, sink n + 1).
+fn random_grid(rng: &mut crate::synth::rng::Rng, dims: [usize; 3]) -> (GridGraph, Vec<Vec<f64>>) {
+    let n = dims[0] * dims[1] * dims[2];
+    let mut cap = vec![vec![0.0; n + 2]; n + 2];
+    let mut g = GridGraph::new(dims);
+    let steps = [1, dims[0], dims[0] * dims[1]];
+    for i in 0..n {
+        let c = [
+            i % dims[0],
+            (i / dims[0]) % dims[1],
+            i / (dims[0] * dims[1]),
+        ];
+        for axis in 0..3 {
+            if c[axis] + 1 < dims[axis] {
+                let (w, rw) = ((rng.next_u64() % 10) as f64, (rng.next_u64() % 10) as f64);
+                g.set_edge(i, axis, w as f32, rw as f32);
+                cap[i][i + steps[axis]] += w;
+                cap[i + steps[axis]][i] += rw;
             }
-            let (c, rc) = ((rng.next_u64() % 10) as f64, (rng.next_u64() % 10) as f64);
-            g.add_edge(i, j, c as f32, rc as f32);
-            cap[i][j] += c;
-            cap[j][i] += rc;
         }
-        #[allow(clippy::needless_range_loop)]
-        for i in 0..n {
-            let (cs, ct) = ((rng.next_u64() % 12) as f64, (rng.next_u64() % 12) as f64);
-            let (cs, ct) = (
-                if rng.uniform() < 0.5 { 0.0 } else { cs },
-                if rng.uniform() < 0.5 { 0.0 } else { ct },
-            );
-            g.add_terminal_weights(i, cs, ct);
-            cap[n][i] += cs;
-            cap[i][n + 1] += ct;
+        let (cs, ct) = ((rng.next_u64() % 12) as f64, (rng.next_u64() % 12) as f64);
+        let (cs, ct) = (
+            if rng.uniform() < 0.6 { 0.0 } else { cs },
+            if rng.uniform() < 0.6 { 0.0 } else { ct },
+        );
+        g.add_terminal_weights(i, cs, ct);
+        cap[n][i] += cs;
+        cap[i][n + 1] += ct;
+    }
+    (g, cap)
+}
+
+/// Random grids, some tall enough to be cut in parts and merged, on one thread and on two:
+/// the flow equals Edmonds-Karp's, and the cut between the source side and the rest carries
+/// exactly the flow.
+#[test]
+fn random_grids_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
+    let mut rng = crate::synth::rng::Rng::new(42, 0);
+    let pools = [1, 2].map(|t| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap()
+    });
+    for trial in 0..300 {
+        let dims = [
+            1 + (rng.next_u64() % 3) as usize,
+            1 + (rng.next_u64() % 3) as usize,
+            1 + (rng.next_u64() % 40) as usize,
+        ];
+        let n = dims[0] * dims[1] * dims[2];
+        let (mut g, cap) = random_grid(&mut rng, dims);
+        if trial % 3 != 0 {
+            g.split_at(2 + trial % 5, 0);
         }
         let reference = edmonds_karp(&cap, n, n + 1);
-        let flow = g.maxflow();
-        assert_eq!(flow, reference, "trial {trial}");
-        // The cut between the source side and the rest carries exactly the flow.
+        let flow = pools[trial % 2].install(|| g.maxflow());
+        assert_eq!(flow, reference, "trial {trial}, dims {dims:?}");
         let side: Vec<bool> = (0..n)
             .map(|i| g.is_source_side(i))
             .chain([true, false])
@@ -132,19 +154,32 @@ fn random_graphs_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
                 }
             }
         }
-        assert_eq!(cut, flow, "trial {trial}: cut capacity");
+        assert_eq!(cut, flow, "trial {trial}, dims {dims:?}: cut capacity");
     }
 }
 
 #[test]
 fn zero_capacities_give_zero_flow_and_every_node_on_the_sink_side() {
-    let mut g = Graph::new(5);
-    for i in 0..4 {
-        g.add_edge(i, i + 1, 0.0, 0.0);
+    for dims in [[5, 1, 1], [3, 2, 40]] {
+        let mut g = GridGraph::new(dims);
+        for i in 0..g.node_count() {
+            g.add_terminal_weights(i, 0.0, 0.0);
+        }
+        assert_eq!(g.maxflow(), 0.0);
+        assert!((0..g.node_count()).all(|i| !g.is_source_side(i)));
     }
-    g.add_terminal_weights(0, 0.0, 0.0);
-    assert_eq!(g.maxflow(), 0.0);
-    assert!((0..5).all(|i| !g.is_source_side(i)));
-    let mut empty = Graph::new(0);
+    let mut empty = GridGraph::new([0, 0, 0]);
     assert_eq!(empty.maxflow(), 0.0);
+}
+
+/// A source and a sink link on the same node: the shared part flows straight through.
+#[test]
+fn both_terminal_links_on_one_node() {
+    let mut g = GridGraph::new([2, 1, 1]);
+    g.add_terminal_weights(0, 5.0, 3.0);
+    g.add_terminal_weights(0, 1.0, 0.0);
+    g.add_terminal_weights(1, 0.0, 10.0);
+    g.set_edge(0, 0, 2.0, 0.0);
+    assert_eq!(g.maxflow(), 5.0);
+    assert!(g.is_source_side(0) && !g.is_source_side(1));
 }

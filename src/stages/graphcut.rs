@@ -35,7 +35,7 @@
 use crate::camera::Camera;
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
-use crate::maxflow::Graph;
+use crate::maxflow::GridGraph;
 use crate::stages::reliability::sample_patch;
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
@@ -357,9 +357,23 @@ pub fn refine_timed(
     timings.photo = start.elapsed().as_secs_f64();
     let start = std::time::Instant::now();
     let face = 4.0 * std::f64::consts::PI / 3.0 * h * h;
-    let mut g = Graph::new(band.len());
-    g.reserve_edges(3 * band.len());
+    // The cut runs on the grid of the band's bounding box; voxels of the box outside the band
+    // stay isolated nodes.
     let [nx, ny, nz] = grid.dims;
+    let mut lo = [usize::MAX; 3];
+    let mut hi = [0usize; 3];
+    for &i in &band {
+        let c = grid.coords(i);
+        for a in 0..3 {
+            lo[a] = lo[a].min(c[a]);
+            hi[a] = hi[a].max(c[a]);
+        }
+    }
+    let box_dims: [usize; 3] = std::array::from_fn(|a| (hi[a] + 1).saturating_sub(lo[a]));
+    let node = |c: [usize; 3]| {
+        (c[0] - lo[0]) + box_dims[0] * ((c[1] - lo[1]) + box_dims[1] * (c[2] - lo[2]))
+    };
+    let mut g = GridGraph::new(box_dims);
     for (k, &i) in band.iter().enumerate() {
         let [x, y, z] = grid.coords(i);
         let mut source = 0.0;
@@ -386,19 +400,26 @@ pub fn refine_timed(
                 sink += face * rho[k];
             } else if (dx, dy, dz) > (0, 0, 0) {
                 let w = (face * (rho[k] + rho[node_of[j] as usize]) / 2.0) as f32;
-                g.add_edge(k, node_of[j] as usize, w, w);
+                let axis = if dx > 0 {
+                    0
+                } else if dy > 0 {
+                    1
+                } else {
+                    2
+                };
+                g.set_edge(node([x, y, z]), axis, w, w);
             }
         }
         if p.pin_rims && source > 0.0 && on_rim(cams, &outlines, &grid.centre(x, y, z)) {
             sink += 1e12; // the hull touches the object here: keep it
         }
-        g.add_terminal_weights(k, source, sink);
+        g.add_terminal_weights(node([x, y, z]), source, sink);
     }
     g.maxflow_with_progress(progress);
     timings.cut = start.elapsed().as_secs_f64();
     let mut out = occupied.to_vec();
-    for (k, &i) in band.iter().enumerate() {
-        if g.is_source_side(k) {
+    for &i in &band {
+        if g.is_source_side(node(grid.coords(i))) {
             out[i] = false;
         }
     }
