@@ -3,20 +3,15 @@
 
 use super::GridGraph;
 
-/// Visits the fixture graph of size n: `edge(i, axis, w)` for the edge of capacity `w` (both
-/// ways) between node i and its neighbour along +axis, `terminals(i, source, sink)` for
-/// every node. Node (x, y, z) is i = x + n (y + n z).
-fn visit(
-    n: usize,
-    mut edge: impl FnMut(usize, usize, f32),
-    mut terminals: impl FnMut(usize, f64, f64),
-) {
-    let idx = |x: usize, y: usize, z: usize| x + n * (y + n * z);
+/// The fixture graph of shared/fixtures/maxflow for size n (see its README). Node (x, y, z)
+/// is i = x + n (y + n z).
+pub fn fixture_graph(n: usize) -> GridGraph {
+    let mut g = GridGraph::new([n, n, n]);
     let rd = (6 * n as i64) / 10;
     for z in 0..n {
         for y in 0..n {
             for x in 0..n {
-                let i = idx(x, y, z);
+                let i = x + n * (y + n * z);
                 let (dx, dy, dz) = (
                     2 * x as i64 + 1 - n as i64,
                     2 * y as i64 + 1 - n as i64,
@@ -28,7 +23,7 @@ fn visit(
                     if c + 1 < n {
                         let hash = crate::synth::rng::mix64(3 * i as u64 + a as u64);
                         let w = 1 + field.min(200) as u64 + hash % 8;
-                        edge(i, a, w as f32);
+                        g.set_edge(i, a, w as f32, w as f32);
                     }
                 }
                 let border = [x, y, z].iter().any(|&c| c == 0 || c == n - 1);
@@ -39,20 +34,9 @@ fn visit(
                     } else {
                         0.0
                     };
-                terminals(i, source, sink);
+                g.add_terminal_weights(i, source, sink);
             }
         }
     }
-}
-
-/// The fixture graph of shared/fixtures/maxflow for size n (see its README).
-pub fn fixture_graph(n: usize) -> GridGraph {
-    let mut g = GridGraph::new([n, n, n]);
-    let g_ref = std::cell::RefCell::new(&mut g);
-    visit(
-        n,
-        |i, a, w| g_ref.borrow_mut().set_edge(i, a, w, w),
-        |i, s, t| g_ref.borrow_mut().add_terminal_weights(i, s, t),
-    );
     g
 }

@@ -90,16 +90,16 @@ impl GridGraph {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
 
-    /// The grid's dimensions.
-    pub fn dims(&self) -> [usize; 3] {
-        self.dims
+    /// Coordinates (x, y, z) of real node `i`.
+    fn coords(&self, i: usize) -> [usize; 3] {
+        let [nx, ny, _] = self.dims;
+        [i % nx, (i / nx) % ny, i / (nx * ny)]
     }
 
     /// Storage index of real node `i`.
     #[inline]
     fn padded(&self, i: usize) -> usize {
-        let [nx, ny, _] = self.dims;
-        let (x, y, z) = (i % nx, (i / nx) % ny, i / (nx * ny));
+        let [x, y, z] = self.coords(i);
         (x + 1) + self.pdims[0] * ((y + 1) + self.pdims[1] * (z + 1))
     }
 
@@ -107,18 +107,14 @@ impl GridGraph {
     /// 2 z): capacity `cap` from i to the neighbour and `rev_cap` back (both >= 0).
     pub fn set_edge(&mut self, i: usize, axis: usize, cap: f32, rev_cap: f32) {
         debug_assert!(cap >= 0.0 && rev_cap >= 0.0 && axis < 3);
-        let c = [
-            i % self.dims[0],
-            (i / self.dims[0]) % self.dims[1],
-            i / (self.dims[0] * self.dims[1]),
-        ];
+        let c = self.coords(i);
         assert!(
             c[axis] + 1 < self.dims[axis],
             "the neighbour lies outside the grid"
         );
         let p = self.padded(i);
         let d = 2 * axis;
-        let q = (p as isize + self.off[d]) as usize;
+        let q = self.step(p, d as u8);
         self.rc[p][d] = cap;
         self.rc[q][d ^ 1] = rev_cap;
     }
@@ -300,13 +296,8 @@ impl GridGraph {
             // Growth: the middle arc found, as (source-tree node, direction).
             let mut middle = None;
             for d in 0..6 {
-                let j = (iu as isize + self.off[d]) as usize;
-                let residual = if si.is_sink {
-                    self.rc[j][d ^ 1]
-                } else {
-                    self.rc[iu][d]
-                };
-                if residual <= 0.0 {
+                let j = self.step(iu, d as u8);
+                if self.tree_residual(iu, j, d, si.is_sink) <= 0.0 {
                     continue;
                 }
                 let sj = &mut self.state[j];
@@ -354,89 +345,98 @@ impl GridGraph {
         (i as isize + self.off[d as usize]) as usize
     }
 
+    /// Residual capacity, in the direction a tree's flow takes, of the arc between `parent`
+    /// and its neighbour `child` in direction `d`: parent -> child in the source tree,
+    /// child -> parent in the sink tree.
+    #[inline]
+    fn tree_residual(&self, parent: usize, child: usize, d: usize, sink: bool) -> f32 {
+        if sink {
+            self.rc[child][d ^ 1]
+        } else {
+            self.rc[parent][d]
+        }
+    }
+
     /// Saturates the path through the arc from source-tree node `s` in direction `d`.
-    #[inline(never)]
     fn augment(&mut self, s: usize, d: usize, orphans: &mut VecDeque<u32>) {
-        let t = (s as isize + self.off[d]) as usize;
-        // Bottleneck: source side (arcs parent -> node), then sink side (node -> parent).
-        let mut bottleneck = self.rc[s][d] as f64;
-        let mut i = s;
-        loop {
-            let p = self.state[i].parent;
-            if p == TERMINAL {
-                break;
-            }
-            let q = self.step(i, p);
-            bottleneck = bottleneck.min(self.rc[q][(p ^ 1) as usize] as f64);
-            i = q;
-        }
-        bottleneck = bottleneck.min(self.tr[i]);
-        let mut i = t;
-        loop {
-            let p = self.state[i].parent;
-            if p == TERMINAL {
-                break;
-            }
-            bottleneck = bottleneck.min(self.rc[i][p as usize] as f64);
-            i = self.step(i, p);
-        }
-        bottleneck = bottleneck.min(-self.tr[i]);
+        let t = self.step(s, d as u8);
+        let bottleneck = (self.rc[s][d] as f64)
+            .min(self.side_bottleneck(s, false))
+            .min(self.side_bottleneck(t, true));
         let b = bottleneck as f32;
-        // Augmentation.
         self.rc[s][d] -= b;
         self.rc[t][d ^ 1] += b;
-        let mut i = s;
-        loop {
-            let p = self.state[i].parent;
-            if p == TERMINAL {
-                break;
-            }
-            let q = self.step(i, p);
-            let down = &mut self.rc[q][(p ^ 1) as usize];
-            *down -= b;
-            if *down <= 0.0 {
-                *down = 0.0;
-                self.state[i].parent = ORPHAN;
-                orphans.push_front(i as u32);
-            }
-            self.rc[i][p as usize] += b;
-            i = q;
-        }
-        self.tr[i] -= bottleneck;
-        if self.tr[i] <= 0.0 {
-            self.tr[i] = 0.0;
-            self.state[i].parent = ORPHAN;
-            orphans.push_front(i as u32);
-        }
-        let mut i = t;
-        loop {
-            let p = self.state[i].parent;
-            if p == TERMINAL {
-                break;
-            }
-            let q = self.step(i, p);
-            let up = &mut self.rc[i][p as usize];
-            *up -= b;
-            if *up <= 0.0 {
-                *up = 0.0;
-                self.state[i].parent = ORPHAN;
-                orphans.push_front(i as u32);
-            }
-            self.rc[q][(p ^ 1) as usize] += b;
-            i = q;
-        }
-        self.tr[i] += bottleneck;
-        if self.tr[i] >= 0.0 {
-            self.tr[i] = 0.0;
-            self.state[i].parent = ORPHAN;
-            orphans.push_front(i as u32);
-        }
+        self.push_along_side(s, bottleneck, false, orphans);
+        self.push_along_side(t, bottleneck, true, orphans);
         self.flow += bottleneck;
+    }
+
+    /// Smallest residual capacity on the tree path from `start` to its terminal, the
+    /// terminal link included.
+    fn side_bottleneck(&self, start: usize, sink: bool) -> f64 {
+        let mut bottleneck = f64::INFINITY;
+        let mut i = start;
+        loop {
+            let p = self.state[i].parent;
+            if p == TERMINAL {
+                break;
+            }
+            let q = self.step(i, p);
+            bottleneck = bottleneck.min(self.tree_residual(q, i, (p ^ 1) as usize, sink) as f64);
+            i = q;
+        }
+        let terminal = if sink { -self.tr[i] } else { self.tr[i] };
+        bottleneck.min(terminal)
+    }
+
+    /// Pushes `amount` along the tree path from `start` to its terminal; nodes whose link to
+    /// their parent (or terminal) saturates become orphans.
+    fn push_along_side(
+        &mut self,
+        start: usize,
+        amount: f64,
+        sink: bool,
+        orphans: &mut VecDeque<u32>,
+    ) {
+        let b = amount as f32;
+        let mut i = start;
+        loop {
+            let p = self.state[i].parent;
+            if p == TERMINAL {
+                break;
+            }
+            let q = self.step(i, p);
+            // The tree's arc carries the flow; its reverse gains the same residual.
+            let (along, back) = if sink {
+                ((i, p as usize), (q, (p ^ 1) as usize))
+            } else {
+                ((q, (p ^ 1) as usize), (i, p as usize))
+            };
+            self.rc[back.0][back.1] += b;
+            let r = &mut self.rc[along.0][along.1];
+            *r -= b;
+            if *r <= 0.0 {
+                *r = 0.0;
+                self.state[i].parent = ORPHAN;
+                orphans.push_front(i as u32);
+            }
+            i = q;
+        }
+        let left = if sink {
+            self.tr[i] + amount
+        } else {
+            self.tr[i] - amount
+        };
+        self.tr[i] = left;
+        if (sink && left >= 0.0) || (!sink && left <= 0.0) {
+            self.tr[i] = 0.0;
+            self.state[i].parent = ORPHAN;
+            orphans.push_front(i as u32);
+        }
     }
 
     /// Distance of `start` to its tree's terminal through valid parents (`INFINITE_D` when
     /// the path meets an orphan), marking the nodes on the way with the current time.
-    #[inline(never)]
     fn origin_distance(&mut self, start: usize, time: u32) -> u32 {
         let mut j = start;
         let mut d: u32 = 0;
@@ -470,22 +470,15 @@ impl GridGraph {
     }
 
     /// Adoption of orphan `i`: a new parent in its tree, or it becomes free.
-    #[inline(never)]
     fn adopt(&mut self, i: usize, time: u32, orphans: &mut VecDeque<u32>, queue: &mut Queue) {
         let sink = self.state[i].is_sink;
-        // A source-tree parent must send flow to i (residual j -> i); a sink-tree parent must
-        // receive flow from i (residual i -> j).
-        let residual = |g: &GridGraph, d: usize, j: usize| {
-            if sink {
-                g.rc[i][d]
-            } else {
-                g.rc[j][d ^ 1]
-            }
-        };
+        // Neighbour j in direction d could be i's parent if the arc j -> i (source tree) or
+        // i -> j (sink tree) has residual capacity.
+        let residual = |g: &GridGraph, d: usize, j: usize| g.tree_residual(j, i, d ^ 1, sink);
         let mut best = FREE;
         let mut best_d = INFINITE_D;
         for d in 0..6 {
-            let j = (i as isize + self.off[d]) as usize;
+            let j = self.step(i, d as u8);
             let sj = self.state[j];
             if sj.is_sink != sink || sj.parent == FREE || residual(self, d, j) <= 0.0 {
                 continue;
@@ -507,7 +500,7 @@ impl GridGraph {
         // reach it become active again.
         self.state[i].parent = FREE;
         for d in 0..6 {
-            let j = (i as isize + self.off[d]) as usize;
+            let j = self.step(i, d as u8);
             let sj = self.state[j];
             if sj.is_sink != sink || sj.parent == FREE {
                 continue;
