@@ -113,9 +113,8 @@ fn check_scene(
         let (hull, refined, n) = concavity_errors(made, seq, dir.path(), f);
         eprintln!("{seq} t{f}: {n} seen samples > 2 voxels from the hull: hull {:.2} cm, refined {:.2} cm", hull * 100.0, refined * 100.0);
         assert!(n > 50, "{seq} t{f}: such regions exist");
-        // The refinement moves the surface towards the truth there (the target of halving the
-        // hull's error is not reached yet: -29% on the tripod at 512x384, -7% on the humanoid
-        // at 384x288, where a pixel is about a voxel).
+        // The refinement at least halves the hull's error there (measured: tripod -54% at
+        // 512x384, humanoid -54% at 384x288, where a pixel is about a voxel).
         assert!(
             refined <= max_ratio * hull,
             "{seq} t{f}: refined {refined:.4} vs hull {hull:.4}"
@@ -127,7 +126,7 @@ fn check_scene(
 #[test]
 fn tripod_refinement_beats_the_hull_where_seen_and_keeps_the_phantom() {
     let made = tripod();
-    let dir = check_scene(made, "tripod", "0..18", &[0], 0.8);
+    let dir = check_scene(made, "tripod", "0..18", &[0], 0.5);
     // The phantom volume beneath the hub survives the refinement on t6-t8 (nothing sees it).
     let skel =
         hullpose::skeleton::Skeleton::read(&made.root.join("data/tripod/skeleton.yaml")).unwrap();
@@ -172,5 +171,5 @@ fn tripod_refinement_beats_the_hull_where_seen_and_keeps_the_phantom() {
 
 #[test]
 fn humanoid_refinement_beats_the_hull_where_seen() {
-    check_scene(humanoid(), "humanoid", "0..0", &[0], 0.97);
+    check_scene(humanoid(), "humanoid", "0..0", &[0], 0.5);
 }

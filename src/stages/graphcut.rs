@@ -23,8 +23,16 @@
 //!   size; the 4 pi / 3 factor makes the cut's cost approximate the surface integral of rho,
 //!   Boykov and Kolmogorov ICCV 2003). A band voxel next to an outside voxel is linked to the
 //!   source (outside) with that face's weight, next to a deeper hull voxel to the sink
-//!   (inside); every band voxel gets a ballooning link lambda h^3 to the sink, rewarding
+//!   (inside); every band voxel gets a ballooning link lambda h^3 b(x) to the sink, rewarding
 //!   enclosed volume so the minimal surface does not shrink.
+//! - **Evidence-weighted ballooning** b(x) in {0, 1} (after the "intelligent ballooning" of
+//!   Hernandez, Vogiatzis and Cipolla, 2007, here along the hull's normal rather than along
+//!   camera rays): b(x) = 0 when a band voxel deeper along the hull's inward normal from x
+//!   has C >= max(C(x), `ballooning_evidence`): the images show a surface behind x, so x is
+//!   likely empty; otherwise 1. A uniform ballooning caps how deep the cut can carve: a layer
+//!   of voxels costs lambda h^3 each and can save at most one face's weight (4 pi / 3) h^2,
+//!   about two voxels at the default lambda, far less than the hull's error in concavities.
+//!   Where nothing sees the surface, C = -1 everywhere and the full ballooning stays.
 //! - **Rims**: an outer band voxel whose centre projects onto a silhouette's outline lies
 //!   where the hull touches the object; with `pin_rims` it is tied to the sink (kept), so the
 //!   refined surface still explains the silhouettes.
@@ -60,6 +68,10 @@ pub struct GraphcutParams {
     pub sigma: f64,
     /// Ballooning weight lambda, per metre (times h^3 per voxel). Default 200.
     pub ballooning: f64,
+    /// Photo-consistency C from which a surface seen behind a band voxel (deeper along the
+    /// hull's inward normal, within the band, and at least as consistent as the voxel)
+    /// removes the voxel's ballooning link. Default 0.3; above 1 the ballooning is uniform.
+    pub ballooning_evidence: f64,
     /// Taubin smoothing iterations of the mesh. Default 10.
     pub smoothing_iterations: usize,
     /// Keep the hull's rim voxels (outer band voxels whose centre projects onto a silhouette's
@@ -79,6 +91,7 @@ impl Default for GraphcutParams {
             best_pairs: 3,
             sigma: 0.5,
             ballooning: 200.0,
+            ballooning_evidence: 0.3,
             smoothing_iterations: 10,
             pin_rims: false,
         }
@@ -103,10 +116,12 @@ pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
         || p.sigma <= 0.0
         || p.ballooning.is_nan()
         || p.ballooning < 0.0
+        || p.ballooning_evidence.is_nan()
         || p.best_pairs == 0
     {
         return Err(
-            "graphcut: sigma must be positive, ballooning not negative, best_pairs at least 1"
+            "graphcut: sigma must be positive, ballooning not negative, ballooning_evidence a \
+             number, best_pairs at least 1"
                 .into(),
         );
     }
@@ -343,16 +358,22 @@ pub fn refine_timed(
     for (k, &i) in band.iter().enumerate() {
         node_of[i] = k as u32;
     }
-    // Cost per band voxel.
-    let rho: Vec<f64> = band
+    // Photo-consistency and hull normal per band voxel.
+    let photo: Vec<(f64, Vector3<f64>)> = band
         .par_iter()
         .map(|&i| {
             let [x, y, z] = grid.coords(i);
-            let c = photo_consistency(grid, sdf, cams, images, depth, p, &grid.centre(x, y, z));
+            photo_consistency(grid, sdf, cams, images, depth, p, &grid.centre(x, y, z))
+        })
+        .collect();
+    let rho: Vec<f64> = photo
+        .iter()
+        .map(|&(c, _)| {
             let t = (std::f64::consts::FRAC_PI_4 * (c - 1.0)).tan();
             1.0 - (-(t * t) / (p.sigma * p.sigma)).exp()
         })
         .collect();
+    let balloon = ballooning_weights(grid, &band, &node_of, &photo, p);
     timings.band_voxels = band.len();
     timings.photo = start.elapsed().as_secs_f64();
     let start = std::time::Instant::now();
@@ -377,7 +398,7 @@ pub fn refine_timed(
     for (k, &i) in band.iter().enumerate() {
         let [x, y, z] = grid.coords(i);
         let mut source = 0.0;
-        let mut sink = p.ballooning * h * h * h;
+        let mut sink = p.ballooning * h * h * h * balloon[k];
         for (dx, dy, dz) in [
             (1i64, 0i64, 0i64),
             (-1, 0, 0),
@@ -424,6 +445,45 @@ pub fn refine_timed(
         }
     }
     out
+}
+
+/// Per band voxel, the factor (0 or 1) of its ballooning link: 0 where the images show a
+/// surface behind the voxel, i.e. a band voxel deeper along the hull's inward normal (within
+/// `band`) has a photo-consistency C at least `ballooning_evidence` and at least the voxel's
+/// own; 1 elsewhere, including wherever nothing sees the surface (C = -1).
+fn ballooning_weights(
+    grid: &GridSpec,
+    band: &[usize],
+    node_of: &[u32],
+    photo: &[(f64, Vector3<f64>)],
+    p: &GraphcutParams,
+) -> Vec<f64> {
+    let h = grid.voxel;
+    let steps = (p.band / h).ceil() as usize;
+    band.par_iter()
+        .zip(photo)
+        .map(|(&i, &(c, n))| {
+            if n == Vector3::zeros() {
+                return 1.0;
+            }
+            let [x, y, z] = grid.coords(i);
+            let centre = grid.centre(x, y, z);
+            // Voxels met at whole-voxel steps along the inward normal, while in the band.
+            let behind = (1..=steps)
+                .map(|s| (centre - n * (s as f64 * h) - grid.origin) / h)
+                .take_while(|q| (0..3).all(|a| q[a] >= 0.0 && q[a] < grid.dims[a] as f64))
+                .map(|q| node_of[grid.index(q.x as usize, q.y as usize, q.z as usize)])
+                .take_while(|&node| node != u32::MAX);
+            let seen_behind = behind
+                .map(|node| photo[node as usize].0)
+                .any(|cb| cb >= p.ballooning_evidence && cb >= c);
+            if seen_behind {
+                0.0
+            } else {
+                1.0
+            }
+        })
+        .collect()
 }
 
 /// Silhouette outline, one pixel wide on each side: pixels whose 3x3 neighbourhood holds both
@@ -494,7 +554,7 @@ fn photo_consistency(
     depth: &[Vec<f32>],
     p: &GraphcutParams,
     x: &Vector3<f64>,
-) -> f64 {
+) -> (f64, Vector3<f64>) {
     let h = grid.voxel;
     // Unit outward normal from the signed distance's gradient (central differences).
     let d = |o: Vector3<f64>| grid.interpolate(sdf, &(x + o), f32::MAX) as f64;
@@ -504,11 +564,14 @@ fn photo_consistency(
         d(Vector3::z() * h) - d(-Vector3::z() * h),
     );
     if grad.norm().is_nan() || grad.norm() <= 1e-12 || grad.iter().any(|v| v.abs() > 1e6) {
-        return -1.0;
+        return (-1.0, Vector3::zeros());
     }
     let n = grad.normalize();
     let surface = x - d(Vector3::zeros()) * n;
-    patch_consistency(cams, images, depth, p, h, x, &n, &surface)
+    (
+        patch_consistency(cams, images, depth, p, h, x, &n, &surface),
+        n,
+    )
 }
 
 /// C at point `x` with patch normal `n`, seen by the cameras that see `surface` (facing and
