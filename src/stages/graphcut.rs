@@ -25,7 +25,8 @@
 //!   source (outside) with that face's weight, next to a deeper hull voxel to the sink
 //!   (inside); every band voxel gets a ballooning link lambda h^3 b(x) to the sink, rewarding
 //!   enclosed volume so the minimal surface does not shrink.
-//! - **Evidence-weighted ballooning** b(x) in {0, 1} (after the "intelligent ballooning" of
+//! - **Evidence-weighted ballooning** (optional, `ballooning_evidence`; without it b = 1 as in
+//!   method.md) b(x) in {0, 1} (after the "intelligent ballooning" of
 //!   Hernandez, Vogiatzis and Cipolla, 2007, here along the hull's normal rather than along
 //!   camera rays): b(x) = 0 when a band voxel deeper along the hull's inward normal from x
 //!   has C >= max(C(x), `ballooning_evidence`): the images show a surface behind x, so x is
@@ -68,10 +69,11 @@ pub struct GraphcutParams {
     pub sigma: f64,
     /// Ballooning weight lambda, per metre (times h^3 per voxel). Default 200.
     pub ballooning: f64,
-    /// Photo-consistency C from which a surface seen behind a band voxel (deeper along the
-    /// hull's inward normal, within the band, and at least as consistent as the voxel)
-    /// removes the voxel's ballooning link. Default 0.3; above 1 the ballooning is uniform.
-    pub ballooning_evidence: f64,
+    /// Evidence-weighted ballooning: the photo-consistency C from which a surface seen behind
+    /// a band voxel (deeper along the hull's inward normal, within the band, and at least as
+    /// consistent as the voxel) removes the voxel's ballooning link (0.3 suits the synthetic
+    /// scenes). Default none: the uniform ballooning of method.md.
+    pub ballooning_evidence: Option<f64>,
     /// Taubin smoothing iterations of the mesh. Default 10.
     pub smoothing_iterations: usize,
     /// Keep the hull's rim voxels (outer band voxels whose centre projects onto a silhouette's
@@ -91,7 +93,7 @@ impl Default for GraphcutParams {
             best_pairs: 3,
             sigma: 0.5,
             ballooning: 200.0,
-            ballooning_evidence: 0.3,
+            ballooning_evidence: None,
             smoothing_iterations: 10,
             pin_rims: false,
         }
@@ -116,7 +118,7 @@ pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
         || p.sigma <= 0.0
         || p.ballooning.is_nan()
         || p.ballooning < 0.0
-        || p.ballooning_evidence.is_nan()
+        || p.ballooning_evidence.is_some_and(f64::is_nan)
         || p.best_pairs == 0
     {
         return Err(
@@ -373,7 +375,10 @@ pub fn refine_timed(
             1.0 - (-(t * t) / (p.sigma * p.sigma)).exp()
         })
         .collect();
-    let balloon = ballooning_weights(grid, &band, &node_of, &photo, p);
+    let balloon = match p.ballooning_evidence {
+        Some(evidence) => ballooning_weights(grid, &band, &node_of, &photo, p.band, evidence),
+        None => vec![1.0; band.len()],
+    };
     timings.band_voxels = band.len();
     timings.photo = start.elapsed().as_secs_f64();
     let start = std::time::Instant::now();
@@ -449,17 +454,18 @@ pub fn refine_timed(
 
 /// Per band voxel, the factor (0 or 1) of its ballooning link: 0 where the images show a
 /// surface behind the voxel, i.e. a band voxel deeper along the hull's inward normal (within
-/// `band`) has a photo-consistency C at least `ballooning_evidence` and at least the voxel's
-/// own; 1 elsewhere, including wherever nothing sees the surface (C = -1).
+/// `band` metres) has a photo-consistency C at least `evidence` and at least the voxel's own;
+/// 1 elsewhere, including wherever nothing sees the surface (C = -1).
 fn ballooning_weights(
     grid: &GridSpec,
     band: &[usize],
     node_of: &[u32],
     photo: &[(f64, Vector3<f64>)],
-    p: &GraphcutParams,
+    band_thickness: f64,
+    evidence: f64,
 ) -> Vec<f64> {
     let h = grid.voxel;
-    let steps = (p.band / h).ceil() as usize;
+    let steps = (band_thickness / h).ceil() as usize;
     band.par_iter()
         .zip(photo)
         .map(|(&i, &(c, n))| {
@@ -476,7 +482,7 @@ fn ballooning_weights(
                 .take_while(|&node| node != u32::MAX);
             let seen_behind = behind
                 .map(|node| photo[node as usize].0)
-                .any(|cb| cb >= p.ballooning_evidence && cb >= c);
+                .any(|cb| cb >= evidence && cb >= c);
             if seen_behind {
                 0.0
             } else {
