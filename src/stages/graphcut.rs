@@ -360,8 +360,8 @@ pub fn refine_timed(
     for (k, &i) in band.iter().enumerate() {
         node_of[i] = k as u32;
     }
-    // Photo-consistency and hull normal per band voxel.
-    let photo: Vec<(f64, Vector3<f64>)> = band
+    // Photo-consistency and hull normal (none where the distance field is flat) per band voxel.
+    let photo: Vec<(f64, Option<Vector3<f64>>)> = band
         .par_iter()
         .map(|&i| {
             let [x, y, z] = grid.coords(i);
@@ -460,7 +460,7 @@ fn ballooning_weights(
     grid: &GridSpec,
     band: &[usize],
     node_of: &[u32],
-    photo: &[(f64, Vector3<f64>)],
+    photo: &[(f64, Option<Vector3<f64>>)],
     band_thickness: f64,
     evidence: f64,
 ) -> Vec<f64> {
@@ -469,9 +469,9 @@ fn ballooning_weights(
     band.par_iter()
         .zip(photo)
         .map(|(&i, &(c, n))| {
-            if n == Vector3::zeros() {
+            let Some(n) = n else {
                 return 1.0;
-            }
+            };
             let [x, y, z] = grid.coords(i);
             let centre = grid.centre(x, y, z);
             // Voxels met at whole-voxel steps along the inward normal, while in the band.
@@ -551,7 +551,8 @@ fn max_filter(grid: &GridSpec, values: &[f32], r: usize) -> Vec<f32> {
 }
 
 /// C(x): the mean of the best pairs' patch correlations around x's projections in the
-/// cameras that see x's nearest hull surface point; -1 without a usable pair.
+/// cameras that see x's nearest hull surface point (-1 without a usable pair), and the hull's
+/// unit outward normal at x (none where the signed distance is flat).
 fn photo_consistency(
     grid: &GridSpec,
     sdf: &[f32],
@@ -560,7 +561,7 @@ fn photo_consistency(
     depth: &[Vec<f32>],
     p: &GraphcutParams,
     x: &Vector3<f64>,
-) -> (f64, Vector3<f64>) {
+) -> (f64, Option<Vector3<f64>>) {
     let h = grid.voxel;
     // Unit outward normal from the signed distance's gradient (central differences).
     let d = |o: Vector3<f64>| grid.interpolate(sdf, &(x + o), f32::MAX) as f64;
@@ -570,13 +571,13 @@ fn photo_consistency(
         d(Vector3::z() * h) - d(-Vector3::z() * h),
     );
     if grad.norm().is_nan() || grad.norm() <= 1e-12 || grad.iter().any(|v| v.abs() > 1e6) {
-        return (-1.0, Vector3::zeros());
+        return (-1.0, None);
     }
     let n = grad.normalize();
     let surface = x - d(Vector3::zeros()) * n;
     (
         patch_consistency(cams, images, depth, p, h, x, &n, &surface),
-        n,
+        Some(n),
     )
 }
 
