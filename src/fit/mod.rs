@@ -451,12 +451,18 @@ impl<'a> Fitter<'a> {
         best
     }
 
-    /// A fit's score, comparable between starts of one frame, m^2: eq. 4 weighted by rho_p
-    /// alone. The observed surface's reliability does not depend on the pose, so a start
+    /// A fit's score, comparable between starts of one frame, m^2: the method's own energy
+    /// without rho_c. The observed surface's weights do not depend on the pose, so a start
     /// cannot lower the score by pressing parts together, as it can lower eq. 4 through
-    /// rho_c (on the humanoid, choosing by eq. 4 picked a pose 5 cm off at t23).
+    /// rho_c (on the humanoid, choosing by eq. 4 picked a pose 5 cm off at t23). A baseline
+    /// is scored with its own weights only, never with rho_p it does not use.
     fn score(&self, prepared: &Prepared, pose: &Pose) -> f64 {
-        self.round(Method::RhoP, &prepared.obs, &prepared.tree, pose)
+        let method = match self.params.method {
+            Method::Proposed | Method::RhoP => Method::RhoP,
+            Method::RhoC | Method::Icp => Method::Icp,
+            Method::Normals => Method::Normals,
+        };
+        self.round(method, &prepared.obs, &prepared.tree, pose)
             .energy()
     }
 
