@@ -32,7 +32,7 @@ export:\n  up_axis: +z        # the synthetic captures stand on +z; glb and bvh 
 /// Which scene to make.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SceneKind {
-    /// The paper's three-armed test object (phantom volume and tip contact).
+    /// The paper's three-armed test object (phantom volume and arms pressed together).
     Tripod,
     /// A human figure moving through contact poses.
     Humanoid,
