@@ -35,8 +35,9 @@
 //!   about two voxels at the default lambda, far less than the hull's error in concavities.
 //!   Where nothing sees the surface, C = -1 everywhere and the full ballooning stays.
 //! - **Rims**: an outer band voxel whose centre projects onto a silhouette's outline lies
-//!   where the hull touches the object; with `pin_rims` it is tied to the sink (kept), so the
-//!   refined surface still explains the silhouettes.
+//!   where the hull touches the object; with `pin_rims` it is tied to the sink (kept), and
+//!   after the cut, carved voxels whose carving uncovers a silhouette pixel the hull covered
+//!   are put back, so the refined surface still explains the silhouettes.
 //! - **Cut**: Boykov-Kolmogorov max-flow; source-side band voxels are carved. Where no camera
 //!   pair sees the surface, rho is flat and the ballooning keeps the hull's shape (the
 //!   phantom volume stays, for stage 4 to flag).
@@ -449,6 +450,9 @@ pub fn refine_timed(
             out[i] = false;
         }
     }
+    if p.pin_rims {
+        keep_silhouettes(grid, occupied, &mut out, cams, silhouettes);
+    }
     out
 }
 
@@ -528,6 +532,69 @@ fn on_rim(cams: &[Camera], outlines: &[Vec<bool>], x: &Vector3<f64>) -> bool {
             }
             _ => false,
         })
+}
+
+/// Puts back the carved voxels whose carving uncovers a silhouette pixel: a pixel inside
+/// a camera's silhouette that some hull voxel covers and no refined voxel does. A voxel covers
+/// the square of pixels around its centre's projection, one pixel narrower on each side than
+/// the voxel appears (so pixels at the edge of a projection count as uncovered: the meshed
+/// surface's outline lies between voxel centres). Where the hull explained a silhouette, the
+/// refined volume still does.
+fn keep_silhouettes(
+    grid: &GridSpec,
+    hull: &[bool],
+    refined: &mut [bool],
+    cams: &[Camera],
+    silhouettes: &[image::GrayImage],
+) {
+    let hull_voxels: Vec<usize> = (0..grid.len()).filter(|&i| hull[i]).collect();
+    // The square of pixels a voxel covers in a camera, clipped to the image.
+    let width = |depth: f64, cam: &Camera| grid.voxel * cam.fx.max(cam.fy) / depth;
+    let footprint = |cam: &Camera, i: usize| {
+        let [x, y, z] = grid.coords(i);
+        let (px, depth) = cam.project_with_depth(&grid.centre(x, y, z));
+        if depth <= 0.0 {
+            return None;
+        }
+        let r = ((0.5 * width(depth, cam)).floor() as i64 - 1).max(0);
+        let (cx, cy) = (px.x.round() as i64, px.y.round() as i64);
+        let (w, h) = (cam.width as i64, cam.height as i64);
+        let (x0, x1) = ((cx - r).max(0), (cx + r).min(w - 1));
+        let (y0, y1) = ((cy - r).max(0), (cy + r).min(h - 1));
+        (x0 <= x1 && y0 <= y1).then_some((x0, x1, y0, y1, w))
+    };
+    let restore: Vec<Vec<usize>> = cams
+        .par_iter()
+        .zip(silhouettes)
+        .map(|(cam, mask)| {
+            // Bit 1: covered by the hull, bit 2: by the refined volume.
+            let mut covered = vec![0u8; (cam.width * cam.height) as usize];
+            for &i in &hull_voxels {
+                if let Some((x0, x1, y0, y1, w)) = footprint(cam, i) {
+                    let bits = if refined[i] { 3 } else { 1 };
+                    for y in y0..=y1 {
+                        for x in x0..=x1 {
+                            covered[(y * w + x) as usize] |= bits;
+                        }
+                    }
+                }
+            }
+            let uncovered = |k: usize| covered[k] == 1 && mask.as_raw()[k] >= 128;
+            hull_voxels
+                .iter()
+                .copied()
+                .filter(|&i| !refined[i])
+                .filter(|&i| {
+                    footprint(cam, i).is_some_and(|(x0, x1, y0, y1, w)| {
+                        (y0..=y1).any(|y| (x0..=x1).any(|x| uncovered((y * w + x) as usize)))
+                    })
+                })
+                .collect()
+        })
+        .collect();
+    for i in restore.into_iter().flatten() {
+        refined[i] = true;
+    }
 }
 
 /// Maximum of `values` over the (2r+1)^3 box around every voxel (separable).
@@ -643,6 +710,8 @@ pub fn mesh(grid: &GridSpec, occupied: &[bool], smoothing: usize) -> (Vec<f32>, 
     );
     let mut m = crate::stages::visual_hull::mesh_sdf(grid, &sdf);
     crate::geometry::smooth::taubin(&mut m, smoothing);
+    let mut sdf = sdf;
+    crate::stages::visual_hull::with_occupancy_sign(&mut sdf, occupied);
     (sdf, m)
 }
 

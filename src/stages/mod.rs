@@ -116,7 +116,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
-        format_version: 2,
+        format_version: 3,
         params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
         sources: visual_hull_sources,
         compute: visual_hull_compute,

@@ -550,15 +550,27 @@ pub fn reconstruct(
         return Ok(None);
     }
     fill_cavities(&grid, &mut occupied);
-    let sdf = box_blur_3d(&grid, &signed_distance(&grid, &occupied));
+    let mut sdf = box_blur_3d(&grid, &signed_distance(&grid, &occupied));
     let mut mesh = mesh_sdf(&grid, &sdf);
     taubin(&mut mesh, p.smoothing_iterations);
+    with_occupancy_sign(&mut sdf, &occupied);
     Ok(Some(Hull {
         grid,
         occupied,
         sdf,
         mesh,
     }))
+}
+
+/// Gives the stored signed distance the sign of the occupancy it was computed from (-1 um
+/// or less inside, 0 or more outside), so that `sdf < 0` reads back exactly the occupied
+/// voxels: the smoothing blur alone turns some corner and edge voxels positive, and a stage
+/// starting from them would lose those voxels and mesh a surface shrunk against the
+/// silhouettes. Meshes are extracted before, from the blurred field itself.
+pub fn with_occupancy_sign(sdf: &mut [f32], occupied: &[bool]) {
+    for (v, &inside) in sdf.iter_mut().zip(occupied) {
+        *v = if inside { v.min(-1e-6) } else { v.max(0.0) };
+    }
 }
 
 /// Meshes the zero level of a signed distance sampled at voxel centres, padded with one
