@@ -592,7 +592,24 @@ fn keep_silhouettes(
                 .collect()
         })
         .collect();
+    // With their carved neighbours too: meshing smooths the surface over about a voxel, so a
+    // lone restored voxel would still leave the outline's pixels a little short.
+    let [nx, ny, nz] = grid.dims;
+    let mut put_back = Vec::new();
     for i in restore.into_iter().flatten() {
+        let [x, y, z] = grid.coords(i);
+        for c in z.saturating_sub(1)..(z + 2).min(nz) {
+            for b in y.saturating_sub(1)..(y + 2).min(ny) {
+                for a in x.saturating_sub(1)..(x + 2).min(nx) {
+                    let j = grid.index(a, b, c);
+                    if hull[j] {
+                        put_back.push(j);
+                    }
+                }
+            }
+        }
+    }
+    for i in put_back {
         refined[i] = true;
     }
 }
