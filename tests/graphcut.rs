@@ -183,11 +183,14 @@ fn coverage_and_accuracy(made: &Made, seq: &str, extra: &str) -> (Vec<(f64, f64)
     let rows = evaluate(dir.path(), "0..0");
     let config = hullpose::config::Config::load(&dir.path().join("pipeline.yaml")).unwrap();
     let job = hullpose::runner::Job::load(config, None).unwrap();
-    let hull = hullpose::eval::reprojection_coverage(&job, "visual_hull", 0).unwrap();
-    let cut = hullpose::eval::reprojection_coverage(&job, "graphcut", 0).unwrap();
+    let hull = hullpose::eval::reprojection_agreement(&job, "visual_hull", 0).unwrap();
+    let cut = hullpose::eval::reprojection_agreement(&job, "graphcut", 0).unwrap();
     let acc = |stage: &str| rows.iter().find(|r| r.1 == stage).unwrap().2;
     (
-        hull.iter().zip(&cut).map(|(h, c)| (h.1, c.1)).collect(),
+        hull.iter()
+            .zip(&cut)
+            .map(|(h, c)| (h.coverage, c.coverage))
+            .collect(),
         acc("visual_hull"),
         acc("graphcut"),
     )

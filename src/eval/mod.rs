@@ -142,10 +142,26 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
     Ok(rows)
 }
 
-/// Silhouette coverage per camera: the share of each view's silhouette pixels that the
-/// reconstruction's mesh, projected through the camera, covers (1 when the mesh explains
-/// every silhouette pixel; a conservative hull scores about 1 with a correct calibration).
-pub fn reprojection_coverage(job: &Job, stage: &str, frame: u32) -> Result<Vec<(String, f64)>> {
+/// How well a reconstruction's mesh, projected through one camera, explains that view's
+/// silhouette.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SilhouetteAgreement {
+    pub camera: String,
+    /// Share of the silhouette's pixels the projected mesh covers (1 when the mesh explains
+    /// every silhouette pixel; a conservative hull scores about 1 with a correct
+    /// calibration).
+    pub coverage: f64,
+    /// Intersection over union of the silhouette and the projected mesh: coverage that also
+    /// counts the pixels the mesh covers outside the silhouette (1 for perfect agreement).
+    pub iou: f64,
+}
+
+/// Silhouette agreement per camera of a reconstruction stage's mesh for one frame.
+pub fn reprojection_agreement(
+    job: &Job,
+    stage: &str,
+    frame: u32,
+) -> Result<Vec<SilhouetteAgreement>> {
     let (ply, _) = crate::stages::hull_files(frame);
     let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;
     coverage_of(job, &pixel_tables(job), &mesh, frame)
@@ -166,8 +182,9 @@ fn pixel_tables(job: &Job) -> Vec<crate::geometry::raster::PixelRays> {
 pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
     use crate::stages::graphcut;
     let mut report = String::new();
-    let mut csv =
-        String::from("frame,stage,camera,silhouette_coverage,mean_vertex_zncc,seen_vertices\n");
+    let mut csv = String::from(
+        "frame,stage,camera,silhouette_coverage,mean_vertex_zncc,seen_vertices,silhouette_iou\n",
+    );
     let rays = pixel_tables(job);
     for &f in &job.frames {
         let frames: Vec<image::RgbImage> = (0..job.sequence.cameras.len())
@@ -191,30 +208,39 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
                 &job.config.graphcut,
                 grid.voxel,
             );
-            let coverage = coverage_of(job, &rays, &mesh, f)?;
-            let mean_cov = coverage.iter().map(|c| c.1).sum::<f64>() / coverage.len().max(1) as f64;
+            let agreement = coverage_of(job, &rays, &mesh, f)?;
+            let mean = |x: &dyn Fn(&SilhouetteAgreement) -> f64| {
+                agreement.iter().map(x).sum::<f64>() / agreement.len().max(1) as f64
+            };
             let _ = writeln!(
                 report,
-                "frame {f:>4}  {stage:>12}: {} vertices, mean silhouette coverage {:.2}%, mean ZNCC {zncc:.3} over {seen} seen vertices",
+                "frame {f:>4}  {stage:>12}: {} vertices, mean silhouette coverage {:.3}%, IoU {:.3}%, mean ZNCC {zncc:.3} over {seen} seen vertices",
                 mesh.vertices.len(),
-                mean_cov * 100.0
+                mean(&|a| a.coverage) * 100.0,
+                mean(&|a| a.iou) * 100.0,
             );
-            for (cam, c) in &coverage {
-                let _ = writeln!(report, "      {cam:>16}  {:>7.2}%", c * 100.0);
-                let _ = writeln!(csv, "{f},{stage},{cam},{c:.6},{zncc:.6},{seen}");
+            for a in &agreement {
+                let (cam, c, iou) = (&a.camera, a.coverage, a.iou);
+                let _ = writeln!(
+                    report,
+                    "      {cam:>16}  coverage {:>7.3}%  IoU {:>7.3}%",
+                    c * 100.0,
+                    iou * 100.0
+                );
+                let _ = writeln!(csv, "{f},{stage},{cam},{c:.6},{zncc:.6},{seen},{iou:.6}");
             }
         }
     }
     Ok((report, csv))
 }
 
-/// Silhouette coverage per camera of `mesh` reprojected (see [`reprojection_coverage`]).
+/// Silhouette agreement per camera of `mesh` reprojected ([`SilhouetteAgreement`]).
 fn coverage_of(
     job: &Job,
     rays: &[crate::geometry::raster::PixelRays],
     mesh: &TriMesh,
     frame: u32,
-) -> Result<Vec<(String, f64)>> {
+) -> Result<Vec<SilhouetteAgreement>> {
     let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     Ok(job
@@ -225,14 +251,18 @@ fn coverage_of(
         .map(|(cam, (mask, rays))| {
             let frags =
                 crate::geometry::raster::rasterize(cam, rays, &mesh.vertices, &mesh.triangles);
-            let (mut sil, mut covered) = (0usize, 0usize);
+            let (mut sil, mut both, mut either) = (0usize, 0usize, 0usize);
             for (m, f) in mask.as_raw().iter().zip(&frags) {
-                if *m >= 128 {
-                    sil += 1;
-                    covered += f.is_some() as usize;
-                }
+                let (inside, drawn) = (*m >= 128, f.is_some());
+                sil += inside as usize;
+                both += (inside && drawn) as usize;
+                either += (inside || drawn) as usize;
             }
-            (cam.name.clone(), covered as f64 / sil.max(1) as f64)
+            SilhouetteAgreement {
+                camera: cam.name.clone(),
+                coverage: both as f64 / sil.max(1) as f64,
+                iou: both as f64 / either.max(1) as f64,
+            }
         })
         .collect())
 }

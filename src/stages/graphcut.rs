@@ -592,15 +592,17 @@ fn keep_silhouettes(
                 .collect()
         })
         .collect();
-    // With their carved neighbours too: meshing smooths the surface over about a voxel, so a
-    // lone restored voxel would still leave the outline's pixels a little short.
+    // With their carved neighbours within 2 voxels too: meshing blurs and smooths the surface
+    // over a voxel or two, so a lone restored voxel would still leave the outline's pixels a
+    // little short (with 1 voxel the temple kept 98.6343% of the silhouettes against the
+    // hull's 98.6348%; with 2, every view's coverage equals the hull's).
     let [nx, ny, nz] = grid.dims;
     let mut put_back = Vec::new();
     for i in restore.into_iter().flatten() {
         let [x, y, z] = grid.coords(i);
-        for c in z.saturating_sub(1)..(z + 2).min(nz) {
-            for b in y.saturating_sub(1)..(y + 2).min(ny) {
-                for a in x.saturating_sub(1)..(x + 2).min(nx) {
+        for c in z.saturating_sub(2)..(z + 3).min(nz) {
+            for b in y.saturating_sub(2)..(y + 3).min(ny) {
+                for a in x.saturating_sub(2)..(x + 3).min(nx) {
                     let j = grid.index(a, b, c);
                     if hull[j] {
                         put_back.push(j);
