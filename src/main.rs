@@ -78,7 +78,9 @@ enum Command {
         frames: Option<FrameRange>,
     },
     /// Compare cached results with the capture's ground truth: reconstruction accuracy
-    /// and completeness per frame and stage (a table, and a CSV under the output folder).
+    /// and completeness per frame and stage, and joint errors (tables, CSVs under the output
+    /// folder). Without ground truth: each view's silhouette coverage and IoU and the mean
+    /// ZNCC per reconstruction stage (coverage.csv).
     Evaluate {
         /// The pipeline.yaml.
         file: PathBuf,
