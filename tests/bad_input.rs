@@ -122,3 +122,22 @@ fn pipeline_yaml_with_unknown_key_names_key_and_line() {
         "{err}"
     );
 }
+
+#[test]
+fn fit_solver_setting_out_of_range_names_the_key() {
+    for (setting, key) in [
+        (
+            "  solver: direct\n  tangential_weight: 0\n",
+            "tangential_weight",
+        ),
+        ("  tangential_weight: 1.5\n", "tangential_weight"),
+        ("  solver: newton\n", "solver"),
+    ] {
+        let err = check_fails(|d| {
+            let p = d.join("pipeline.yaml");
+            let text = std::fs::read_to_string(&p).unwrap();
+            std::fs::write(&p, format!("{text}fit:\n{setting}")).unwrap();
+        });
+        assert!(err.contains("pipeline.yaml") && err.contains(key), "{err}");
+    }
+}

@@ -1,8 +1,8 @@
 //! Stage 6 on exact observations: with the true surface observed, the fit recovers the
-//! true pose from the previous frame's; a frame without observation keeps the previous pose
+//! true pose from the previous frame's (with either solver); a frame without observation keeps the previous pose
 //! and is flagged; damaged observations never put NaN into a pose.
 
-use hullpose::fit::{FitParams, FitStatus, Fitter, Method, Observation};
+use hullpose::fit::{FitParams, FitStatus, Fitter, Method, Observation, Solver};
 use hullpose::skeleton::{pose::joints, Pose, Skeleton};
 use hullpose::synth::{SceneKind, SynthOptions};
 use nalgebra::Vector3;
@@ -54,11 +54,16 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let model =
         hullpose::stages::model::build(&skeleton, &mesh(dir.path(), 0), &Default::default())
             .unwrap();
-    for method in [Method::Proposed, Method::Icp] {
+    for (method, solver) in [
+        (Method::Proposed, Solver::Alternating),
+        (Method::Icp, Solver::Alternating),
+        (Method::Proposed, Solver::Direct),
+    ] {
         let fitter = Fitter::new(
             &model,
             FitParams {
                 method,
+                solver,
                 ..Default::default()
             },
         );
@@ -66,8 +71,12 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
         for f in [5u32, 9, 13] {
             let r = fitter.fit(&observe(&mesh(dir.path(), f)), &poses[f as usize - 1].1);
             let e = joint_error(&skeleton, &r.pose, &poses[f as usize].1);
-            eprintln!("{method:?} t{f}: {:.2} mm, {:?}", e * 1000.0, r.diagnostics);
-            assert!(e < 0.004, "{method:?} t{f}: joint error {e} m");
+            eprintln!(
+                "{method:?} {solver:?} t{f}: {:.2} mm, {:?}",
+                e * 1000.0,
+                r.diagnostics
+            );
+            assert!(e < 0.004, "{method:?} {solver:?} t{f}: joint error {e} m");
             assert_eq!(r.diagnostics.status, FitStatus::Converged);
         }
     }

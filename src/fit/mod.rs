@@ -86,6 +86,20 @@ pub enum Start {
     Predicted,
 }
 
+/// How a frame's energy is minimized (method.md "Stage 6", Optimization).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Solver {
+    /// Rounds of (a) pairs and weights, (b) `lm_steps` LM steps on the held pairs, with
+    /// Anderson acceleration of the rounds: the paper's alternation.
+    Alternating,
+    /// One damped Gauss-Newton step per round whose H weighs the pairs' offsets along the
+    /// surface by `tangential_weight` (the held point-to-point H stiffens sliding that the
+    /// re-found pairs allow, so alternation creeps), kept only when the next round's eq. 4
+    /// energy is lower. The gradient is eq. 4's, so it stops where the alternation does.
+    Direct,
+}
+
 /// Parameters of the fit stage (pipeline.yaml key `fit`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -107,6 +121,11 @@ pub struct FitParams {
     /// For `normals`: pairs whose normals differ by more than this are rejected, degrees.
     /// Default 45.
     pub normal_angle_deg: f64,
+    /// `alternating` or `direct` ([`Solver`]). Default `alternating`.
+    pub solver: Solver,
+    /// For `direct`: the weight of a pair's offset along the surface in the step's H,
+    /// (0, 1]; 1 is the point-to-point H. Default 0.1.
+    pub tangential_weight: f64,
     /// Rounds of (correspondences, LM steps) per frame at most. Default 400.
     pub max_iterations: usize,
     /// LM steps per round (correspondences held). Default 3.
@@ -146,6 +165,8 @@ impl Default for FitParams {
             contact_rule: ContactRule::RestDistance,
             contact_rest_distance: 0.075,
             normal_angle_deg: 45.0,
+            solver: Solver::Alternating,
+            tangential_weight: 0.1,
             max_iterations: 400,
             lm_steps: 3,
             acceleration: 5,
@@ -170,6 +191,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         return Err(format!(
             "fit.normal_angle_deg must be in (0, 180] degrees, got {}",
             p.normal_angle_deg
+        ));
+    }
+    if !(p.tangential_weight > 0.0 && p.tangential_weight <= 1.0) {
+        return Err(format!(
+            "fit.tangential_weight must be in (0, 1], got {}",
+            p.tangential_weight
         ));
     }
     if p.max_iterations == 0 || p.lm_steps == 0 {
@@ -527,20 +554,79 @@ impl<'a> Fitter<'a> {
     }
 
     fn fit_prepared(&self, prepared: &Prepared, start: &Pose) -> FitResult {
+        let round = self.round(self.params.method, &prepared.obs, &prepared.tree, start);
+        let diagnostics = FitDiagnostics::unfitted(FitStatus::IterationCap, prepared.observed);
+        let pose = start.clone();
+        match self.params.solver {
+            Solver::Alternating => self.fit_alternating(prepared, (pose, round, diagnostics)),
+            Solver::Direct => self.fit_direct(prepared, (pose, round, diagnostics)),
+        }
+    }
+
+    /// [`Solver::Direct`]: one damped step per round, kept when the round at the new pose
+    /// has a lower eq. 4 energy than the round it started from.
+    fn fit_direct(&self, prepared: &Prepared, from: FitStart) -> FitResult {
+        let (mut pose, mut round, mut diagnostics) = from;
         let p = &self.params;
         let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
-        let mut diagnostics = FitDiagnostics::unfitted(FitStatus::IterationCap, prepared.observed);
-        let mut pose = start.clone();
-        let mut round = self.round(p.method, obs, obs_tree, &pose);
+        let mut lambda = 1e-3;
+        'rounds: while diagnostics.iterations < p.max_iterations {
+            let problem = self.held(&round);
+            let system = |tangential: f64| {
+                self.time("lm steps", || problem.normal_equations(&pose, tangential))
+            };
+            let (mut h, mut g, _) = system(p.tangential_weight);
+            let mut point_to_point = false;
+            loop {
+                if diagnostics.iterations >= p.max_iterations {
+                    break 'rounds;
+                }
+                let Some(delta) = solve::damped_step(&h, &g, lambda) else {
+                    lambda *= 4.0;
+                    continue;
+                };
+                let candidate = pose.apply_increment(delta.as_slice());
+                diagnostics.iterations += 1;
+                let next = self.round(p.method, obs, obs_tree, &candidate);
+                let moved = joint_motion(self.model, &pose, &candidate);
+                if candidate.is_finite() && next.energy() < round.energy() {
+                    diagnostics.lm_steps += 1;
+                    lambda = (lambda / 3.0).max(1e-9);
+                    pose = candidate;
+                    round = next;
+                    if moved < p.tolerance {
+                        diagnostics.status = FitStatus::Converged;
+                        break 'rounds;
+                    }
+                    break;
+                }
+                if !point_to_point {
+                    // Where re-found pairs do not follow the surface (edges, contact), fall
+                    // back to the point-to-point H of the held pairs for this round.
+                    (h, g, _) = system(1.0);
+                    point_to_point = true;
+                    continue;
+                }
+                lambda *= 4.0;
+                if moved < p.tolerance {
+                    // No step as small as the tolerance lowers the energy: a minimum.
+                    diagnostics.status = FitStatus::Converged;
+                    break 'rounds;
+                }
+            }
+        }
+        finish(pose, &round, diagnostics)
+    }
+
+    /// [`Solver::Alternating`].
+    fn fit_alternating(&self, prepared: &Prepared, from: FitStart) -> FitResult {
+        let (mut pose, mut round, mut diagnostics) = from;
+        let p = &self.params;
+        let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
         let mut lambda = 1e-3;
         let mut accel = anderson::Anderson::new(p.acceleration);
         while diagnostics.iterations < p.max_iterations {
-            let problem = HeldProblem {
-                skeleton: &self.sample.skeleton,
-                rest: &self.sample.mesh.vertices,
-                weights: &self.sample.weights,
-                targets: &round.targets,
-            };
+            let problem = self.held(&round);
             let (stepped, report) = self.time("lm steps", || {
                 solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut lambda)
             });
@@ -574,11 +660,17 @@ impl<'a> Fitter<'a> {
             }
         }
         // The energy and shares at the final pose, with its own pairs.
-        diagnostics.energy = round.energy();
-        diagnostics.rms = (round.weighted_sq / round.weight_sum.max(1e-300)).sqrt();
-        diagnostics.downweighted_share = round.downweighted as f64 / round.pairs.max(1) as f64;
-        diagnostics.contact_share = round.contact_share;
-        FitResult { pose, diagnostics }
+        finish(pose, &round, diagnostics)
+    }
+
+    /// Eq. 4 with `round`'s pairs held, over the thinned model.
+    fn held<'b>(&'b self, round: &'b Round) -> HeldProblem<'b> {
+        HeldProblem {
+            skeleton: &self.sample.skeleton,
+            rest: &self.sample.mesh.vertices,
+            weights: &self.sample.weights,
+            targets: &round.targets,
+        }
     }
 
     /// Step (a): pose the model, its normals and rho_c, pairs both ways and their weights.
@@ -661,10 +753,12 @@ impl<'a> Fitter<'a> {
         for (u, &(v, d2)) in backward.iter().enumerate() {
             add(v, u, d2);
         }
-        let pulls = (0..n)
-            .filter(|&v| w_sum[v] > 0.0)
-            .map(|v| (v as u32, w_sum[v], target[v] / w_sum[v]))
+        let pulled: Vec<usize> = (0..n).filter(|&v| w_sum[v] > 0.0).collect();
+        let pulls = pulled
+            .iter()
+            .map(|&v| (v as u32, w_sum[v], target[v] / w_sum[v]))
             .collect();
+        let pull_normals = pulled.iter().map(|&v| normals[v]).collect();
         let r_c: f64 = rho_c.iter().sum();
         let r_p: f64 = if method.uses_rho_p() {
             obs.rho_p.iter().sum()
@@ -672,7 +766,10 @@ impl<'a> Fitter<'a> {
             obs.vertices.len() as f64
         };
         Round {
-            targets: Targets { pulls },
+            targets: Targets {
+                pulls,
+                normals: pull_normals,
+            },
             weighted_sq,
             weight_sum,
             pairs: forward.len() + backward.len(),
@@ -714,4 +811,16 @@ pub fn joint_motion(model: &BodyModel, a: &Pose, b: &Pose) -> f64 {
         .zip(&jb)
         .map(|(x, y)| (x.0 - y.0).norm().max((x.1 - y.1).norm()))
         .fold(0.0, f64::max)
+}
+
+/// Where a solver starts: the pose, its round (pairs, weights) and the diagnostics so far.
+type FitStart = (Pose, Round, FitDiagnostics);
+
+/// The fit's result at `pose`, whose pairs and weights `round` holds.
+fn finish(pose: Pose, round: &Round, mut diagnostics: FitDiagnostics) -> FitResult {
+    diagnostics.energy = round.energy();
+    diagnostics.rms = (round.weighted_sq / round.weight_sum.max(1e-300)).sqrt();
+    diagnostics.downweighted_share = round.downweighted as f64 / round.pairs.max(1) as f64;
+    diagnostics.contact_share = round.contact_share;
+    FitResult { pose, diagnostics }
 }

@@ -21,6 +21,8 @@ const CHUNK: usize = 2048;
 pub struct Targets {
     /// (model vertex, W_v, c_v).
     pub pulls: Vec<(u32, f64, Vector3<f64>)>,
+    /// The posed model's unit normal at each pull's vertex (same order as `pulls`).
+    pub normals: Vec<Vector3<f64>>,
 }
 
 /// The held problem: model, targets.
@@ -55,8 +57,16 @@ impl HeldProblem<'_> {
         partial.iter().sum()
     }
 
-    /// The Gauss-Newton system at `pose`: H = sum W J^T J, g = sum W J^T r, and the energy.
-    fn normal_equations(&self, pose: &Pose) -> (DMatrix<f64>, DVector<f64>, f64) {
+    /// The Gauss-Newton system at `pose`: H = sum W J^T M J, g = sum W J^T r, and the
+    /// energy, where M = n n^T + `tangential` (I - n n^T) weighs a residual's part along the
+    /// vertex normal n fully and its part along the surface by `tangential` (1: the
+    /// point-to-point H of the held energy; below 1 it approaches the curvature of the
+    /// distance to the observed surface, along which nearest neighbours slide).
+    pub fn normal_equations(
+        &self,
+        pose: &Pose,
+        tangential: f64,
+    ) -> (DMatrix<f64>, DVector<f64>, f64) {
         let bones = PosedBones::new(self.skeleton, pose);
         let n = pose.parameter_count();
         let zero = || Accumulator {
@@ -65,42 +75,60 @@ impl HeldProblem<'_> {
             e: 0.0,
             blocks: Vec::new(),
             cols: Vec::new(),
+            along: Vec::new(),
         };
         // Per fixed chunk, then summed in order (deterministic, see `energy`).
         let partials: Vec<Accumulator> = self
             .targets
             .pulls
             .par_chunks(CHUNK)
-            .map(|chunk| {
-                chunk.iter().fold(zero(), |mut acc, &(v, w, c)| {
-                    let v = v as usize;
-                    let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
-                    let r = y - c;
-                    acc.e += w * r.norm_squared();
-                    sparse_vertex_jacobian(
-                        &bones,
-                        &self.rest[v],
-                        &self.weights[v],
-                        &mut acc.blocks,
-                    );
-                    // Columns: the translation's identity, then each block's three.
-                    acc.cols.clear();
-                    for k in 0..3 {
-                        acc.cols.push((k, Vector3::ith(k, 1.0)));
-                    }
-                    for (b, c3) in &acc.blocks {
-                        for (k, col) in c3.iter().enumerate() {
-                            acc.cols.push((3 + 3 * b + k, *col));
+            .enumerate()
+            .map(|(ci, chunk)| {
+                chunk
+                    .iter()
+                    .enumerate()
+                    .fold(zero(), |mut acc, (k, &(v, w, c))| {
+                        let v = v as usize;
+                        let normal = self.targets.normals.get(ci * CHUNK + k);
+                        let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
+                        let r = y - c;
+                        acc.e += w * r.norm_squared();
+                        sparse_vertex_jacobian(
+                            &bones,
+                            &self.rest[v],
+                            &self.weights[v],
+                            &mut acc.blocks,
+                        );
+                        // Columns: the translation's identity, then each block's three.
+                        acc.cols.clear();
+                        for k in 0..3 {
+                            acc.cols.push((k, Vector3::ith(k, 1.0)));
                         }
-                    }
-                    for (i, (pi, ci)) in acc.cols.iter().enumerate() {
-                        acc.g[*pi] += w * ci.dot(&r);
-                        for (pj, cj) in &acc.cols[i..] {
-                            acc.h[pi * n + pj] += w * ci.dot(cj);
+                        for (b, c3) in &acc.blocks {
+                            for (k, col) in c3.iter().enumerate() {
+                                acc.cols.push((3 + 3 * b + k, *col));
+                            }
                         }
-                    }
-                    acc
-                })
+                        // ci^T M cj = t ci.cj + (1 - t)(n.ci)(n.cj).
+                        let (t, along) = match normal {
+                            Some(nv) if tangential < 1.0 => (tangential, Some(nv)),
+                            _ => (1.0, None),
+                        };
+                        acc.along.clear();
+                        acc.along.extend(
+                            acc.cols
+                                .iter()
+                                .map(|(_, c)| along.map_or(0.0, |nv| nv.dot(c))),
+                        );
+                        for (i, (pi, ci)) in acc.cols.iter().enumerate() {
+                            acc.g[*pi] += w * ci.dot(&r);
+                            for (j, (pj, cj)) in acc.cols.iter().enumerate().skip(i) {
+                                acc.h[pi * n + pj] +=
+                                    w * (t * ci.dot(cj) + (1.0 - t) * acc.along[i] * acc.along[j]);
+                            }
+                        }
+                        acc
+                    })
             })
             .collect();
         let Accumulator { h, g, e, .. } = partials.into_iter().fold(zero(), |mut a, b| {
@@ -131,6 +159,8 @@ struct Accumulator {
     e: f64,
     blocks: Vec<(usize, [Vector3<f64>; 3])>,
     cols: Vec<(usize, Vector3<f64>)>,
+    /// n . column, per column.
+    along: Vec<f64>,
 }
 
 /// How a run of LM steps went.
@@ -158,7 +188,7 @@ pub fn levenberg_marquardt(
         energy_after: f64::NAN,
     };
     for _ in 0..max_steps {
-        let (h, g, e0) = problem.normal_equations(&pose);
+        let (h, g, e0) = problem.normal_equations(&pose, 1.0);
         if report.steps == 0 {
             report.energy_before = e0;
             report.energy_after = e0;
@@ -166,23 +196,12 @@ pub fn levenberg_marquardt(
         if e0.is_nan() || e0 <= 0.0 || !e0.is_finite() {
             break;
         }
-        let n = h.nrows();
-        let floor = 1e-12 * (h.trace() / n as f64).max(1e-30);
         let mut improved = false;
         for _ in 0..12 {
-            let mut a = h.clone();
-            for i in 0..n {
-                a[(i, i)] += *lambda * h[(i, i)].max(floor) + floor;
-            }
-            let Some(chol) = a.cholesky() else {
+            let Some(delta) = damped_step(&h, &g, *lambda) else {
                 *lambda *= 4.0;
                 continue;
             };
-            let delta = chol.solve(&(-&g));
-            if delta.iter().any(|x| !x.is_finite()) {
-                *lambda *= 4.0;
-                continue;
-            }
             let candidate = pose.apply_increment(delta.as_slice());
             let e1 = problem.energy(&candidate);
             if e1 < e0 && candidate.is_finite() {
@@ -200,4 +219,18 @@ pub fn levenberg_marquardt(
         }
     }
     (pose, report)
+}
+
+/// The increment solving (H + lambda diag(H)) delta = -g (Marquardt's scaling, with a
+/// small floor so that parameters no pair moves stay put); `None` when the system cannot be
+/// solved at this damping.
+pub fn damped_step(h: &DMatrix<f64>, g: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
+    let n = h.nrows();
+    let floor = 1e-12 * (h.trace() / n as f64).max(1e-30);
+    let mut a = h.clone();
+    for i in 0..n {
+        a[(i, i)] += lambda * h[(i, i)].max(floor) + floor;
+    }
+    let delta = a.cholesky()?.solve(&(-g));
+    delta.iter().all(|x| x.is_finite()).then_some(delta)
 }
