@@ -96,7 +96,8 @@ pub enum Solver {
     /// One damped Gauss-Newton step per round whose H weighs the pairs' offsets along the
     /// surface by `tangential_weight` (the held point-to-point H stiffens sliding that the
     /// re-found pairs allow, so alternation creeps), kept only when the next round's eq. 4
-    /// energy is lower. The gradient is eq. 4's, so it stops where the alternation does.
+    /// energy is lower; where no step lowers it, one alternating round. The gradient is
+    /// eq. 4's, so it stops where the alternation does.
     Direct,
 }
 
@@ -609,7 +610,24 @@ impl<'a> Fitter<'a> {
                 }
                 lambda *= 4.0;
                 if moved < p.tolerance {
-                    // No step as small as the tolerance lowers the energy: a minimum.
+                    // No step as small as the tolerance lowers the energy with re-found
+                    // pairs; rho_c and the pairs change with the pose, so that can be a
+                    // stall short of the minimum. One alternating round (LM steps on the
+                    // held pairs, kept unconditionally) decides: it moves on, or it too
+                    // stays within the tolerance and the frame has converged.
+                    let mut held_lambda = 1e-3;
+                    let (stepped, report) = self.time("lm steps", || {
+                        solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut held_lambda)
+                    });
+                    diagnostics.iterations += 1;
+                    diagnostics.lm_steps += report.steps;
+                    let moved = joint_motion(self.model, &pose, &stepped);
+                    pose = stepped;
+                    round = self.round(p.method, obs, obs_tree, &pose);
+                    lambda = 1e-3;
+                    if moved >= p.tolerance {
+                        break;
+                    }
                     diagnostics.status = FitStatus::Converged;
                     break 'rounds;
                 }
