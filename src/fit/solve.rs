@@ -83,13 +83,12 @@ impl HeldProblem<'_> {
             .pulls
             .par_chunks(CHUNK)
             .enumerate()
-            .map(|(ci, chunk)| {
+            .map(|(chunk_index, chunk)| {
                 chunk
                     .iter()
                     .enumerate()
-                    .fold(zero(), |mut acc, (k, &(v, w, c))| {
+                    .fold(zero(), |mut acc, (offset, &(v, w, c))| {
                         let v = v as usize;
-                        let normal = self.targets.normals.get(ci * CHUNK + k);
                         let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
                         let r = y - c;
                         acc.e += w * r.norm_squared();
@@ -109,22 +108,22 @@ impl HeldProblem<'_> {
                                 acc.cols.push((3 + 3 * b + k, *col));
                             }
                         }
-                        // ci^T M cj = t ci.cj + (1 - t)(n.ci)(n.cj).
-                        let (t, along) = match normal {
-                            Some(nv) if tangential < 1.0 => (tangential, Some(nv)),
-                            _ => (1.0, None),
-                        };
+                        // Below 1, ci^T M cj = t ci.cj + (1 - t)(n.ci)(n.cj); at 1, M = I.
+                        let t = tangential;
                         acc.along.clear();
-                        acc.along.extend(
-                            acc.cols
-                                .iter()
-                                .map(|(_, c)| along.map_or(0.0, |nv| nv.dot(c))),
-                        );
+                        if t < 1.0 {
+                            let normal = self.targets.normals[chunk_index * CHUNK + offset];
+                            acc.along
+                                .extend(acc.cols.iter().map(|(_, col)| normal.dot(col)));
+                        }
                         for (i, (pi, ci)) in acc.cols.iter().enumerate() {
                             acc.g[*pi] += w * ci.dot(&r);
                             for (j, (pj, cj)) in acc.cols.iter().enumerate().skip(i) {
-                                acc.h[pi * n + pj] +=
-                                    w * (t * ci.dot(cj) + (1.0 - t) * acc.along[i] * acc.along[j]);
+                                let mut m = ci.dot(cj);
+                                if t < 1.0 {
+                                    m = t * m + (1.0 - t) * acc.along[i] * acc.along[j];
+                                }
+                                acc.h[pi * n + pj] += w * m;
                             }
                         }
                         acc
