@@ -101,6 +101,23 @@ pub enum Solver {
     Direct,
 }
 
+/// How the `normals` method pairs a vertex whose nearest vertex on the other surface has a
+/// normal beyond `normal_angle_deg`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NormalPairs {
+    /// With the nearest vertex whose normal agrees (Ogawara et al.'s correspondence search,
+    /// as the paper's Fig. 12 describes it: a model vertex may pair with a phantom surface
+    /// or, where the touching surfaces are missing, with the far side of the other part,
+    /// whenever their normals agree), searched up to [`COMPATIBLE_SEARCH_LIMIT`].
+    NearestCompatible,
+    /// Not at all: the nearest pair is dropped.
+    Reject,
+}
+
+/// How far the `nearest_compatible` search looks for a vertex whose normal agrees, metres.
+pub const COMPATIBLE_SEARCH_LIMIT: f64 = 0.2;
+
 /// Parameters of the fit stage (pipeline.yaml key `fit`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -122,6 +139,9 @@ pub struct FitParams {
     /// For `normals`: pairs whose normals differ by more than this are rejected, degrees.
     /// Default 45.
     pub normal_angle_deg: f64,
+    /// For `normals`: how a vertex whose nearest partner is rejected is paired
+    /// ([`NormalPairs`]). Default `nearest_compatible`.
+    pub normal_pairs: NormalPairs,
     /// `alternating` or `direct` ([`Solver`]). Default `alternating`.
     pub solver: Solver,
     /// For `direct`: the weight of a pair's offset along the surface in the step's H,
@@ -166,6 +186,7 @@ impl Default for FitParams {
             contact_rule: ContactRule::RestDistance,
             contact_rest_distance: 0.075,
             normal_angle_deg: 45.0,
+            normal_pairs: NormalPairs::NearestCompatible,
             solver: Solver::Alternating,
             tangential_weight: 0.1,
             max_iterations: 400,
@@ -719,11 +740,15 @@ impl<'a> Fitter<'a> {
             vec![1.0; posed.len()]
         };
         let cos_limit = p.normal_angle_deg.to_radians().cos();
+        // `normals` with `nearest_compatible`: the nearest vertex whose normal agrees.
+        let compatible =
+            method == Method::Normals && p.normal_pairs == NormalPairs::NearestCompatible;
+        let agree = |v: usize, u: usize| normals[v].dot(&obs.normals[u]) >= cos_limit;
         let weight = |v: usize, u: usize| -> f64 {
             match method {
                 Method::Icp => 1.0,
                 Method::Normals => {
-                    if normals[v].dot(&obs.normals[u]) >= cos_limit {
+                    if agree(v, u) {
                         1.0
                     } else {
                         0.0
@@ -734,27 +759,40 @@ impl<'a> Fitter<'a> {
                 Method::Proposed => rho_c[v] * obs.rho_p[u],
             }
         };
-        // Model -> observed: each model vertex's nearest observed vertex.
-        let forward: Vec<(usize, f64)> = self.time("nearest model->observed", || {
-            posed
+        // Each query point's partner in `tree`: the nearest, or with `compatible` the nearest
+        // whose normal agrees (`agrees(query, partner)`); (0, inf) for none.
+        let partners = |queries: &[Vector3<f64>],
+                        tree: &NearestTree,
+                        agrees: &(dyn Fn(usize, usize) -> bool + Sync)|
+         -> Vec<(usize, f64)> {
+            queries
                 .par_iter()
-                .map(|q| obs_tree.nearest(q).map_or((0, f64::INFINITY), |x| x))
+                .enumerate()
+                .map(|(i, q)| {
+                    if compatible {
+                        tree.nearest_where(q, COMPATIBLE_SEARCH_LIMIT, |j| agrees(i, j))
+                    } else {
+                        tree.nearest(q)
+                    }
+                    .map_or((0, f64::INFINITY), |x| x)
+                })
                 .collect()
+        };
+        // Model -> observed: each model vertex's nearest observed vertex.
+        let forward = self.time("nearest model->observed", || {
+            partners(&posed, obs_tree, &|v, u| agree(v, u))
         });
         // Observed -> model.
         let model_tree = self.time("model tree", || NearestTree::new(&posed));
-        let backward: Vec<(usize, f64)> = self.time("nearest observed->model", || {
-            obs.vertices
-                .par_iter()
-                .map(|q| model_tree.nearest(q).map_or((0, f64::INFINITY), |x| x))
-                .collect()
+        let backward = self.time("nearest observed->model", || {
+            partners(&obs.vertices, &model_tree, &|u, v| agree(v, u))
         });
         let n = posed.len();
         let mut w_sum = vec![0.0; n];
         let mut target = vec![Vector3::zeros(); n];
         let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
         let mut add = |v: usize, u: usize, d2: f64| {
-            let w = weight(v, u);
+            let w = if d2.is_finite() { weight(v, u) } else { 0.0 };
             if w < 0.5 {
                 downweighted += 1;
             }
