@@ -12,13 +12,14 @@
 
 mod anderson;
 pub mod contact;
+mod moments;
 pub mod solve;
 
 use crate::geometry::nearest::NearestTree;
 use crate::geometry::TriMesh;
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::skinning::pose_vertices;
-use crate::skeleton::{Pose, PosedBones};
+use crate::skeleton::{Pose, PosedBones, Skeleton};
 use contact::{ContactParams, ContactRule, ContactSearch};
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -174,6 +175,12 @@ pub struct FitParams {
     pub restarts: bool,
     /// See `restarts`. Default 3.
     pub restart_energy_ratio: f64,
+    /// A tracked frame's fit also counts as lost (see `restarts`) when some bone's
+    /// head-to-tail direction ends more than this many degrees from its direction both in
+    /// the start pose and in the previous frame's pose: a limb folded back onto itself.
+    /// Default 60 (the humanoid's limbs turn at most 74 degrees between frames, the
+    /// tripod's 11; its right hand folded back 98 to 154 degrees without this check).
+    pub restart_turn_deg: f64,
 }
 
 impl Default for FitParams {
@@ -197,6 +204,7 @@ impl Default for FitParams {
             min_observed_share: 0.05,
             restarts: true,
             restart_energy_ratio: 3.0,
+            restart_turn_deg: 60.0,
         }
     }
 }
@@ -240,6 +248,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         return Err(format!(
             "fit.restart_energy_ratio must be a number >= 1, got {}",
             p.restart_energy_ratio
+        ));
+    }
+    if !(p.restart_turn_deg > 0.0 && p.restart_turn_deg <= 180.0) {
+        return Err(format!(
+            "fit.restart_turn_deg must be in (0, 180] degrees, got {}",
+            p.restart_turn_deg
         ));
     }
     if !(0.0..1.0).contains(&p.min_observed_share) {
@@ -444,8 +458,9 @@ impl<'a> Fitter<'a> {
 
     /// Fits a tracked frame from the start `params.start` chooses (`previous` is the
     /// neighbour's pose, nearer t0; `before` the pose one frame further back), and when that
-    /// fit looks lost (iteration cap, or energy above `restart_energy_ratio` times
-    /// `previous_energy`) also from the other of the two and from the reference pose at the
+    /// fit looks lost (iteration cap, energy above `restart_energy_ratio` times
+    /// `previous_energy`, or a bone turned more than `restart_turn_deg` from both the start
+    /// and `previous`) also from the other of the two and from the reference pose at the
     /// previous root position; the lowest [`Fitter::score`] wins. `iterations` counts the
     /// rounds of every start. A frame without enough observation keeps `previous`.
     pub fn fit_tracked(
@@ -476,7 +491,9 @@ impl<'a> Fitter<'a> {
         let mut best = self.fit_prepared(&prepared, &first);
         let lost = best.diagnostics.status == FitStatus::IterationCap
             || previous_energy
-                .is_some_and(|e| e > 0.0 && best.diagnostics.energy > p.restart_energy_ratio * e);
+                .is_some_and(|e| e > 0.0 && best.diagnostics.energy > p.restart_energy_ratio * e)
+            || largest_turn_deg(&self.model.skeleton, &best.pose, &first, previous)
+                > p.restart_turn_deg;
         if !p.restarts || !lost {
             return best;
         }
@@ -704,12 +721,12 @@ impl<'a> Fitter<'a> {
 
     /// Eq. 4 with `round`'s pairs held, over the thinned model.
     fn held<'b>(&'b self, round: &'b Round) -> HeldProblem<'b> {
-        HeldProblem {
-            skeleton: &self.sample.skeleton,
-            rest: &self.sample.mesh.vertices,
-            weights: &self.sample.weights,
-            targets: &round.targets,
-        }
+        HeldProblem::new(
+            &self.sample.skeleton,
+            &self.sample.mesh.vertices,
+            &self.sample.weights,
+            &round.targets,
+        )
     }
 
     /// Step (a): pose the model, its normals and rho_c, pairs both ways and their weights.
@@ -879,4 +896,45 @@ fn finish(pose: Pose, round: &Round, mut diagnostics: FitDiagnostics) -> FitResu
     diagnostics.downweighted_share = round.downweighted as f64 / round.pairs.max(1) as f64;
     diagnostics.contact_share = round.contact_share;
     FitResult { pose, diagnostics }
+}
+
+/// The largest angle, degrees, by which a bone's head-to-tail direction in `pose` differs
+/// from its direction in whichever of `a` and `b` is nearer to it.
+fn largest_turn_deg(skeleton: &Skeleton, pose: &Pose, a: &Pose, b: &Pose) -> f64 {
+    let [fit, a, b] = [pose, a, b].map(|q| PosedBones::new(skeleton, q));
+    let direction = |bones: &PosedBones, i: usize| bones.tails[i] - bones.heads[i];
+    (0..skeleton.bones.len())
+        .map(|i| {
+            let d = direction(&fit, i);
+            d.angle(&direction(&a, i)).min(d.angle(&direction(&b, i)))
+        })
+        .fold(0.0, f64::max)
+        .to_degrees()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::skeleton::skinning::tests::chain;
+    use nalgebra::Rotation3;
+
+    /// A bone folded back is measured from the nearer of the two reference poses; turning a
+    /// parent turns its child's direction too, and a root translation turns nothing.
+    #[test]
+    fn largest_turn_is_measured_from_the_nearer_pose() {
+        let skeleton = chain();
+        let rest = Pose::rest(skeleton.bones.len());
+        let mut folded = rest.clone();
+        // Bone "b" (index 2) turned 150 degrees about the vertical axis.
+        folded.rotations[2] = Rotation3::new(Vector3::z() * 150f64.to_radians());
+        let mut moved = rest.clone();
+        moved.translation = Vector3::new(0.3, -0.2, 0.1);
+        let turn = |p: &Pose, a: &Pose, b: &Pose| largest_turn_deg(&skeleton, p, a, b);
+        assert!((turn(&folded, &rest, &moved) - 150.0).abs() < 1e-6);
+        assert!(turn(&folded, &rest, &folded).abs() < 1e-6);
+        assert!(turn(&moved, &rest, &rest).abs() < 1e-6);
+        let mut arm = rest.clone();
+        arm.rotations[1] = Rotation3::new(Vector3::y() * 70f64.to_radians());
+        assert!((turn(&arm, &rest, &rest) - 70.0).abs() < 1e-6);
+    }
 }

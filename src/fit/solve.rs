@@ -8,6 +8,7 @@
 //! weight W_v times the squared distance to their weighted mean c_v. So each model vertex
 //! contributes one 3-row residual, with the analytic Jacobian of linear blend skinning.
 
+use super::moments::RigidMoments;
 use crate::skeleton::skinning::{pose_vertex, sparse_vertex_jacobian, Influences};
 use crate::skeleton::{Pose, PosedBones, Skeleton};
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -27,26 +28,70 @@ pub struct Targets {
 
 /// The held problem: model, targets.
 pub struct HeldProblem<'a> {
-    pub skeleton: &'a Skeleton,
+    skeleton: &'a Skeleton,
     /// Reference (t0) vertices, metres.
-    pub rest: &'a [Vector3<f64>],
-    pub weights: &'a [Influences],
-    pub targets: &'a Targets,
+    rest: &'a [Vector3<f64>],
+    weights: &'a [Influences],
+    targets: &'a Targets,
+    /// The pulls of vertices that move with one bone, summed per bone ([`RigidMoments`]).
+    rigid: Vec<RigidMoments>,
+    /// Indices (into `targets.pulls`) of the blended vertices, summed one by one.
+    blended: Vec<u32>,
+    /// Indices of every pull (the tangential H needs each vertex's normal).
+    all: Vec<u32>,
 }
 
-impl HeldProblem<'_> {
+impl<'a> HeldProblem<'a> {
+    pub fn new(
+        skeleton: &'a Skeleton,
+        rest: &'a [Vector3<f64>],
+        weights: &'a [Influences],
+        targets: &'a Targets,
+    ) -> HeldProblem<'a> {
+        // Pulls of vertices with one influence, by bone; the others one by one.
+        let pulls = &targets.pulls;
+        let mut per_bone: Vec<Vec<u32>> = vec![Vec::new(); skeleton.bones.len()];
+        let mut blended = Vec::new();
+        for (i, &(v, _, _)) in pulls.iter().enumerate() {
+            match weights[v as usize].as_slice() {
+                [(b, w)] if *w == 1.0 => per_bone[*b].push(i as u32),
+                _ => blended.push(i as u32),
+            }
+        }
+        let rigid = per_bone
+            .iter()
+            .enumerate()
+            .filter_map(|(b, mine)| {
+                let pulls = mine.iter().map(|&i| {
+                    let (v, w, c) = pulls[i as usize];
+                    (rest[v as usize], w, c)
+                });
+                RigidMoments::new(b, pulls)
+            })
+            .collect();
+        HeldProblem {
+            skeleton,
+            rest,
+            weights,
+            targets,
+            rigid,
+            blended,
+            all: (0..pulls.len() as u32).collect(),
+        }
+    }
+
     /// sum_v W_v |v(p) - c_v|^2 (m^2).
     pub fn energy(&self, pose: &Pose) -> f64 {
         let bones = PosedBones::new(self.skeleton, pose);
         // Fixed chunks summed in order: the same bits on every run and thread count.
         let partial: Vec<f64> = self
-            .targets
-            .pulls
+            .blended
             .par_chunks(CHUNK)
             .map(|chunk| {
                 chunk
                     .iter()
-                    .map(|&(v, w, c)| {
+                    .map(|&i| {
+                        let (v, w, c) = self.targets.pulls[i as usize];
                         let v = v as usize;
                         w * (pose_vertex(&bones, &self.rest[v], &self.weights[v]) - c)
                             .norm_squared()
@@ -54,7 +99,7 @@ impl HeldProblem<'_> {
                     .sum::<f64>()
             })
             .collect();
-        partial.iter().sum()
+        partial.iter().sum::<f64>() + self.rigid.iter().map(|m| m.energy(&bones)).sum::<f64>()
     }
 
     /// The Gauss-Newton system at `pose`: H = sum W J^T M J, g = sum W J^T r, and the
@@ -67,6 +112,21 @@ impl HeldProblem<'_> {
         pose: &Pose,
         tangential: f64,
     ) -> (DMatrix<f64>, DVector<f64>, f64) {
+        if tangential < 1.0 {
+            return self.summed(pose, tangential, &self.all, &[]);
+        }
+        self.summed(pose, 1.0, &self.blended, &self.rigid)
+    }
+
+    /// The normal equations of the pulls `each` summed vertex by vertex and of `rigid` in
+    /// closed form.
+    fn summed(
+        &self,
+        pose: &Pose,
+        tangential: f64,
+        each: &[u32],
+        rigid: &[RigidMoments],
+    ) -> (DMatrix<f64>, DVector<f64>, f64) {
         let bones = PosedBones::new(self.skeleton, pose);
         let n = pose.parameter_count();
         let zero = || Accumulator {
@@ -78,59 +138,59 @@ impl HeldProblem<'_> {
             along: Vec::new(),
         };
         // Per fixed chunk, then summed in order (deterministic, see `energy`).
-        let partials: Vec<Accumulator> = self
-            .targets
-            .pulls
+        let partials: Vec<Accumulator> = each
             .par_chunks(CHUNK)
-            .enumerate()
-            .map(|(chunk_index, chunk)| {
-                chunk
-                    .iter()
-                    .enumerate()
-                    .fold(zero(), |mut acc, (offset, &(v, w, c))| {
-                        let v = v as usize;
-                        let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
-                        let r = y - c;
-                        acc.e += w * r.norm_squared();
-                        sparse_vertex_jacobian(
-                            &bones,
-                            &self.rest[v],
-                            &self.weights[v],
-                            &mut acc.blocks,
-                        );
-                        // Columns: the translation's identity, then each block's three.
-                        acc.cols.clear();
-                        for k in 0..3 {
-                            acc.cols.push((k, Vector3::ith(k, 1.0)));
+            .map(|chunk| {
+                chunk.iter().fold(zero(), |mut acc, &pull| {
+                    let (v, w, c) = self.targets.pulls[pull as usize];
+                    let v = v as usize;
+                    let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
+                    let r = y - c;
+                    acc.e += w * r.norm_squared();
+                    sparse_vertex_jacobian(
+                        &bones,
+                        &self.rest[v],
+                        &self.weights[v],
+                        &mut acc.blocks,
+                    );
+                    // Columns: the translation's identity, then each block's three.
+                    acc.cols.clear();
+                    for k in 0..3 {
+                        acc.cols.push((k, Vector3::ith(k, 1.0)));
+                    }
+                    for (b, c3) in &acc.blocks {
+                        for (k, col) in c3.iter().enumerate() {
+                            acc.cols.push((3 + 3 * b + k, *col));
                         }
-                        for (b, c3) in &acc.blocks {
-                            for (k, col) in c3.iter().enumerate() {
-                                acc.cols.push((3 + 3 * b + k, *col));
+                    }
+                    // Below 1, ci^T M cj = t ci.cj + (1 - t)(n.ci)(n.cj); at 1, M = I.
+                    let t = tangential;
+                    acc.along.clear();
+                    if t < 1.0 {
+                        let normal = self.targets.normals[pull as usize];
+                        acc.along
+                            .extend(acc.cols.iter().map(|(_, col)| normal.dot(col)));
+                    }
+                    for (i, (pi, ci)) in acc.cols.iter().enumerate() {
+                        acc.g[*pi] += w * ci.dot(&r);
+                        for (j, (pj, cj)) in acc.cols.iter().enumerate().skip(i) {
+                            let mut m = ci.dot(cj);
+                            if t < 1.0 {
+                                m = t * m + (1.0 - t) * acc.along[i] * acc.along[j];
                             }
+                            acc.h[pi * n + pj] += w * m;
                         }
-                        // Below 1, ci^T M cj = t ci.cj + (1 - t)(n.ci)(n.cj); at 1, M = I.
-                        let t = tangential;
-                        acc.along.clear();
-                        if t < 1.0 {
-                            let normal = self.targets.normals[chunk_index * CHUNK + offset];
-                            acc.along
-                                .extend(acc.cols.iter().map(|(_, col)| normal.dot(col)));
-                        }
-                        for (i, (pi, ci)) in acc.cols.iter().enumerate() {
-                            acc.g[*pi] += w * ci.dot(&r);
-                            for (j, (pj, cj)) in acc.cols.iter().enumerate().skip(i) {
-                                let mut m = ci.dot(cj);
-                                if t < 1.0 {
-                                    m = t * m + (1.0 - t) * acc.along[i] * acc.along[j];
-                                }
-                                acc.h[pi * n + pj] += w * m;
-                            }
-                        }
-                        acc
-                    })
+                    }
+                    acc
+                })
             })
             .collect();
-        let Accumulator { h, g, e, .. } = partials.into_iter().fold(zero(), |mut a, b| {
+        let Accumulator {
+            mut h,
+            mut g,
+            mut e,
+            ..
+        } = partials.into_iter().fold(zero(), |mut a, b| {
             a.h.iter_mut().zip(&b.h).for_each(|(x, y)| *x += y);
             a.g.iter_mut().zip(&b.g).for_each(|(x, y)| *x += y);
             a.e += b.e;
@@ -145,6 +205,15 @@ impl HeldProblem<'_> {
                 hm[(i, j)] = s;
                 hm[(j, i)] = s;
             }
+        }
+        if !rigid.is_empty() {
+            // The closed-form terms, both triangles.
+            h.fill(0.0);
+            for m in rigid {
+                m.add_normal_equations(&bones, &mut h, &mut g);
+                e += m.energy(&bones);
+            }
+            hm += DMatrix::from_row_slice(n, n, &h);
         }
         (hm, DVector::from_vec(g), e)
     }
@@ -232,4 +301,61 @@ pub fn damped_step(h: &DMatrix<f64>, g: &DVector<f64>, lambda: f64) -> Option<DV
     }
     let delta = a.cholesky()?.solve(&(-g));
     delta.iter().all(|x| x.is_finite()).then_some(delta)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::skeleton::skinning::skin_weights;
+    use crate::skeleton::skinning::tests::chain;
+    use nalgebra::Rotation3;
+
+    /// The closed-form sums of the rigidly attached vertices give the same energy, gradient
+    /// and Gauss-Newton matrix as summing every vertex one by one.
+    #[test]
+    fn rigid_moments_match_the_sum_over_vertices() {
+        let p = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
+        let skeleton = chain();
+        let mut state = 777u64;
+        let mut rnd = move || {
+            state = crate::synth::rng::mix64(state);
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let rest: Vec<Vector3<f64>> = (0..3000)
+            .map(|_| p(0.7 * rnd(), 0.1 * rnd(), 1.0 + 0.4 * rnd().abs()))
+            .collect();
+        let weights = skin_weights(&skeleton, &rest, 0.05);
+        let rigid = weights.iter().filter(|w| w.len() == 1).count();
+        assert!(rigid > 1000 && rigid < rest.len(), "{rigid} rigid vertices");
+        // Every other vertex pulled towards a point near it.
+        let pulls: Vec<(u32, f64, Vector3<f64>)> = (0..rest.len())
+            .step_by(2)
+            .map(|v| {
+                let c = rest[v] + p(rnd(), rnd(), rnd()) * 0.05;
+                (v as u32, 0.1 + rnd().abs(), c)
+            })
+            .collect();
+        let normals = vec![Vector3::z(); pulls.len()];
+        let targets = Targets { pulls, normals };
+        let problem = HeldProblem::new(&skeleton, &rest, &weights, &targets);
+        for _ in 0..5 {
+            let mut pose = Pose::rest(skeleton.bones.len());
+            pose.translation = p(rnd(), rnd(), rnd()) * 0.1;
+            for r in &mut pose.rotations {
+                *r = Rotation3::new(p(rnd(), rnd(), rnd()) * 0.4);
+            }
+            let (h, g, e) = problem.normal_equations(&pose, 1.0);
+            let (h1, g1, e1) = problem.summed(&pose, 1.0, &problem.all, &[]);
+            let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-9 * scale;
+            assert!(close(e, e1, e1), "{e} {e1}");
+            assert!(close(problem.energy(&pose), e1, e1));
+            let hs = h1.abs().max();
+            assert!(h.iter().zip(h1.iter()).all(|(a, b)| close(*a, *b, hs)));
+            let gs = g1.abs().max();
+            assert!(
+                g.iter().zip(g1.iter()).all(|(a, b)| close(*a, *b, gs)),
+                "{g} {g1}"
+            );
+        }
+    }
 }

@@ -173,12 +173,13 @@ pub fn vertex_jacobian(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::skeleton::{Bone, Pose};
     use nalgebra::Rotation3;
 
-    fn chain() -> Skeleton {
+    /// A small branching skeleton (root, a two-bone arm and a one-bone arm) for tests.
+    pub(crate) fn chain() -> Skeleton {
         let p = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
         let bone = |name: &str, parent, head, tail| Bone {
             name: name.into(),
