@@ -333,6 +333,87 @@ pub fn nearest(points: usize, queries: usize) -> String {
     )
 }
 
+/// The fit stage's tracking over the job's frames, in memory, with `method` overriding
+/// fit.method: seconds, rounds and status per frame, then milliseconds per round of each
+/// step and the mean seconds per tracked frame.
+pub fn track(job: &Job, method: Option<&str>) -> Result<String> {
+    let ctx = job.context();
+    let mut params = job.config.fit.clone();
+    if let Some(name) = method {
+        params.method = crate::fit::Method::ALL
+            .into_iter()
+            .find(|m| m.name() == name)
+            .ok_or_else(|| {
+                crate::Error::Usage(format!(
+                    "--method {name}: expected one of icp, normals, rho_c, rho_p, proposed"
+                ))
+            })?;
+    }
+    let frames = job.tracked_frames()?;
+    if frames.is_empty() {
+        return Err(crate::Error::Usage(format!(
+            "{} has no skeleton.yaml: there is nothing to track",
+            job.sequence.dir.display()
+        )));
+    }
+    let tracked = crate::stages::fit::track(&ctx, &frames, &params, &|_| ())?;
+    // With ground truth, each frame's mean joint error (cm).
+    let errors: Vec<(u32, f64)> = match job.sequence.ground_truth_joints()? {
+        Some(truth) => {
+            let model = crate::stages::model::load(&ctx)?;
+            let rows: Vec<_> = tracked
+                .results
+                .iter()
+                .flat_map(|(f, r)| crate::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
+                .collect();
+            let path = job.sequence.dir.join("ground_truth/joints.csv");
+            crate::eval::pose::joint_errors(&truth, &rows, &path)?
+        }
+        None => Vec::new(),
+    };
+    let mut out = format!(
+        "tracking, method {}, sample_spacing {} m\n  frame  seconds  rounds  error_cm  status\n",
+        params.method.name(),
+        params.sample_spacing
+    );
+    let (mut fitted, mut seconds, mut rounds) = (0usize, 0.0, 0usize);
+    for (frame, secs) in &tracked.seconds {
+        let Some((_, r)) = tracked.results.iter().find(|x| x.0 == *frame) else {
+            continue;
+        };
+        let d = &r.diagnostics;
+        let error = errors
+            .iter()
+            .find(|e| e.0 == *frame)
+            .map_or("-".to_string(), |e| format!("{:.2}", e.1 * 100.0));
+        let _ = writeln!(
+            out,
+            "  {frame:>5} {secs:>8.3} {:>7} {error:>9}  {}",
+            d.iterations,
+            d.status.name()
+        );
+        if d.status != crate::fit::FitStatus::Reference {
+            fitted += 1;
+            seconds += secs;
+            rounds += d.iterations;
+        }
+    }
+    let per_round = |s: f64| s * 1e3 / rounds.max(1) as f64;
+    let _ = writeln!(out, "  per round ({rounds} rounds):");
+    let mut sum = 0.0;
+    for (step, secs) in &tracked.steps {
+        sum += secs;
+        let _ = writeln!(out, "    {step:<26} {:8.2} ms", per_round(*secs));
+    }
+    let _ = writeln!(out, "    {:<26} {:8.2} ms", "total", per_round(sum));
+    let _ = writeln!(
+        out,
+        "  {fitted} tracked frames in {seconds:.2} s: {:.3} s per frame",
+        seconds / fitted.max(1) as f64
+    );
+    Ok(out)
+}
+
 /// The fit's steps on one frame (needs the model and the frame's reliability in the cache):
 /// one tracked fit from t0's pose, with `spacing` (the fit's sample_spacing), reporting the
 /// vertex counts and the time per round of each step.

@@ -242,6 +242,15 @@ enum BenchWhat {
         #[arg(long)]
         spacing: Option<f64>,
     },
+    /// The fit stage's tracking over the configured frames, in memory (needs the model and
+    /// every frame's reliability in the cache; nothing is written): seconds and rounds per
+    /// frame, and milliseconds per round of each step.
+    Track {
+        file: PathBuf,
+        /// Override fit.method.
+        #[arg(long)]
+        method: Option<String>,
+    },
     /// k-d tree nearest-neighbour queries per second (compare tools/bench_fit.py).
     Nearest {
         #[arg(long, default_value_t = 100_000)]
@@ -476,6 +485,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
                 print!("{}", hullpose::bench::fit(&job, frame, spacing)?);
             }
+            BenchWhat::Track { file, method } => {
+                let job = Job::load(Config::load(&file)?, None)?;
+                print!("{}", hullpose::bench::track(&job, method.as_deref())?);
+            }
             BenchWhat::Nearest { points, queries } => {
                 print!("{}", hullpose::bench::nearest(points, queries))
             }
@@ -664,7 +677,8 @@ fn ablation(job: &Job, frames: Option<FrameRange>) -> anyhow::Result<()> {
         };
         let bar = indicatif::ProgressBar::new(tracked.len() as u64);
         bar.set_message(method.name());
-        let results = hullpose::stages::fit::track(&ctx, &tracked, &params, &|_| bar.inc(1))?;
+        let results =
+            hullpose::stages::fit::track(&ctx, &tracked, &params, &|_| bar.inc(1))?.results;
         bar.finish_and_clear();
         let model = hullpose::stages::model::load(&ctx)?;
         let rows: Vec<_> = results

@@ -105,7 +105,9 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
             ..Default::default()
         };
         let frames: Vec<u32> = tracked.iter().copied().filter(|&f| f <= last).collect();
-        let fits = hullpose::stages::fit::track(&ctx, &frames, &params, &|_| {}).unwrap();
+        let fits = hullpose::stages::fit::track(&ctx, &frames, &params, &|_| {})
+            .unwrap()
+            .results;
         let rows: Vec<_> = fits
             .iter()
             .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
@@ -148,11 +150,13 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     )
     .unwrap();
     assert_eq!(diag.len(), 19);
-    // Every tracked frame fitted (the heavy contact at t9 may end at the round cap after
-    // the restarts; its accuracy is asserted below).
+    // Every tracked frame fitted (the contact frames may end circling in place or at the
+    // round cap after the restarts; their accuracy is asserted below).
     assert!(diag[1..].iter().all(|x| matches!(
         x.1,
-        hullpose::fit::FitStatus::Converged | hullpose::fit::FitStatus::IterationCap
+        hullpose::fit::FitStatus::Converged
+            | hullpose::fit::FitStatus::Stalled
+            | hullpose::fit::FitStatus::IterationCap
     )));
     assert!(d.join("cache/fit/000009.ply").is_file());
     assert!(d.join("output/evaluation/joint_error.png").is_file());

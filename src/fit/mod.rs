@@ -116,6 +116,11 @@ pub enum NormalPairs {
     Reject,
 }
 
+/// See [`FitParams::stall_rounds`]: rounds whose net joint displacement is below this share
+/// of their summed per-round motion circle in place. Converging or sliding rounds move
+/// mostly one way (net close to the sum).
+pub const STALL_RATIO: f64 = 0.2;
+
 /// How far the `nearest_compatible` search looks for a vertex whose normal agrees, metres.
 pub const COMPATIBLE_SEARCH_LIMIT: f64 = 0.2;
 
@@ -164,6 +169,11 @@ pub struct FitParams {
     /// tolerance stops early and the shortfall accumulates over tracked frames, 1.2 cm at
     /// the tripod's t9 with 0.00005 against 0.8 cm).
     pub tolerance: f64,
+    /// A frame's rounds also stop (status `stalled`) when, over this many rounds, no joint
+    /// ended farther than a fifth ([`STALL_RATIO`]) of the distance the joints moved in
+    /// them from where it began: the rounds circle in one place instead of converging.
+    /// 0 turns it off. Default 100.
+    pub stall_rounds: usize,
     /// Frames whose observed surface has fewer vertices than this share of the model's keep
     /// the previous pose (and are flagged). Default 0.05.
     pub min_observed_share: f64,
@@ -201,6 +211,7 @@ impl Default for FitParams {
             acceleration: 5,
             sample_spacing: 0.01,
             tolerance: 0.00001,
+            stall_rounds: 100,
             min_observed_share: 0.05,
             restarts: true,
             restart_energy_ratio: 3.0,
@@ -285,6 +296,10 @@ pub enum FitStatus {
     Converged,
     /// Stopped at `max_iterations`.
     IterationCap,
+    /// Stopped when the rounds went back and forth in one place for `stall_rounds` rounds
+    /// without settling (rho_c moves with the pose, so the rounds need not have a fixed
+    /// point).
+    Stalled,
     /// Too little observed surface: the previous pose was kept.
     NoObservation,
 }
@@ -295,6 +310,7 @@ impl FitStatus {
             FitStatus::Reference => "reference",
             FitStatus::Converged => "converged",
             FitStatus::IterationCap => "iteration_cap",
+            FitStatus::Stalled => "stalled",
             FitStatus::NoObservation => "no_observation",
         }
     }
@@ -304,6 +320,7 @@ impl FitStatus {
             FitStatus::Reference,
             FitStatus::Converged,
             FitStatus::IterationCap,
+            FitStatus::Stalled,
             FitStatus::NoObservation,
         ]
         .into_iter()
@@ -528,8 +545,7 @@ impl<'a> Fitter<'a> {
             Method::RhoC | Method::Icp => Method::Icp,
             Method::Normals => Method::Normals,
         };
-        self.round(method, &prepared.obs, &prepared.tree, pose)
-            .energy()
+        self.round(method, prepared, pose).energy()
     }
 
     /// The result for a frame with too little usable observation: `pose` kept, flagged.
@@ -593,7 +609,7 @@ impl<'a> Fitter<'a> {
     }
 
     fn fit_prepared(&self, prepared: &Prepared, start: &Pose) -> FitResult {
-        let round = self.round(self.params.method, &prepared.obs, &prepared.tree, start);
+        let round = self.round(self.params.method, prepared, start);
         let diagnostics = FitDiagnostics::unfitted(FitStatus::IterationCap, prepared.observed);
         let pose = start.clone();
         match self.params.solver {
@@ -607,7 +623,6 @@ impl<'a> Fitter<'a> {
     fn fit_direct(&self, prepared: &Prepared, from: FitStart) -> FitResult {
         let (mut pose, mut round, mut diagnostics) = from;
         let p = &self.params;
-        let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
         let mut lambda = 1e-3;
         'rounds: while diagnostics.iterations < p.max_iterations {
             let problem = self.held(&round);
@@ -626,7 +641,7 @@ impl<'a> Fitter<'a> {
                 };
                 let candidate = pose.apply_increment(delta.as_slice());
                 diagnostics.iterations += 1;
-                let next = self.round(p.method, obs, obs_tree, &candidate);
+                let next = self.round(p.method, prepared, &candidate);
                 let moved = joint_motion(self.model, &pose, &candidate);
                 if candidate.is_finite() && next.energy() < round.energy() {
                     diagnostics.lm_steps += 1;
@@ -661,7 +676,7 @@ impl<'a> Fitter<'a> {
                     diagnostics.lm_steps += report.steps;
                     let moved = joint_motion(self.model, &pose, &stepped);
                     pose = stepped;
-                    round = self.round(p.method, obs, obs_tree, &pose);
+                    round = self.round(p.method, prepared, &pose);
                     lambda = 1e-3;
                     if moved >= p.tolerance {
                         break;
@@ -678,9 +693,9 @@ impl<'a> Fitter<'a> {
     fn fit_alternating(&self, prepared: &Prepared, from: FitStart) -> FitResult {
         let (mut pose, mut round, mut diagnostics) = from;
         let p = &self.params;
-        let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
         let mut lambda = 1e-3;
         let mut accel = anderson::Anderson::new(p.acceleration);
+        let mut stall = StallWatch::new(p.stall_rounds, joints_of(self.model, &pose));
         while diagnostics.iterations < p.max_iterations {
             let problem = self.held(&round);
             let (stepped, report) = self.time("lm steps", || {
@@ -696,7 +711,7 @@ impl<'a> Fitter<'a> {
             if let Some(extrapolated) = accel.next(&pose.to_vector(), &stepped.to_vector()) {
                 let candidate = Pose::from_vector(&extrapolated);
                 if candidate.is_finite() {
-                    let r = self.round(p.method, obs, obs_tree, &candidate);
+                    let r = self.round(p.method, prepared, &candidate);
                     if r.energy() < round.energy() {
                         next = candidate;
                         next_round = Some(r);
@@ -705,13 +720,16 @@ impl<'a> Fitter<'a> {
                     }
                 }
             }
-            let next_round =
-                next_round.unwrap_or_else(|| self.round(p.method, obs, obs_tree, &next));
-            let moved = joint_motion(self.model, &pose, &next);
+            let next_round = next_round.unwrap_or_else(|| self.round(p.method, prepared, &next));
+            let moved = stall.push(joints_of(self.model, &next));
             pose = next;
             round = next_round;
             if moved < p.tolerance {
                 diagnostics.status = FitStatus::Converged;
+                break;
+            }
+            if stall.stalled() {
+                diagnostics.status = FitStatus::Stalled;
                 break;
             }
         }
@@ -730,14 +748,9 @@ impl<'a> Fitter<'a> {
     }
 
     /// Step (a): pose the model, its normals and rho_c, pairs both ways and their weights.
-    fn round(
-        &self,
-        method: Method,
-        obs: &Observation,
-        obs_tree: &NearestTree,
-        pose: &Pose,
-    ) -> Round {
+    fn round(&self, method: Method, prepared: &Prepared, pose: &Pose) -> Round {
         let p = &self.params;
+        let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
         let m = &self.sample;
         let (posed, normals) = self.time("pose, normals", || {
             let bones = PosedBones::new(&m.skeleton, pose);
@@ -878,11 +891,63 @@ pub fn thin(points: &[Vector3<f64>], spacing: f64) -> Vec<usize> {
 
 /// The largest displacement of any joint (head or tail) between two poses, metres.
 pub fn joint_motion(model: &BodyModel, a: &Pose, b: &Pose) -> f64 {
-    let ja = crate::skeleton::pose::joints(&model.skeleton, a);
-    let jb = crate::skeleton::pose::joints(&model.skeleton, b);
-    ja.iter()
-        .zip(&jb)
-        .map(|(x, y)| (x.0 - y.0).norm().max((x.1 - y.1).norm()))
+    largest_distance(&joints_of(model, a), &joints_of(model, b))
+}
+
+/// Every joint (head, tail) of the model at `pose`, metres.
+fn joints_of(model: &BodyModel, pose: &Pose) -> Vec<Vector3<f64>> {
+    crate::skeleton::pose::joints(&model.skeleton, pose)
+        .into_iter()
+        .flat_map(|(head, tail)| [head, tail])
+        .collect()
+}
+
+/// The joints of the last rounds, to tell rounds that circle in place
+/// ([`FitParams::stall_rounds`]).
+struct StallWatch {
+    rounds: usize,
+    /// The joints before each of the last `rounds` rounds and after the latest, with the
+    /// largest joint motion of each round (metres; none for the first entry).
+    history: std::collections::VecDeque<(Vec<Vector3<f64>>, f64)>,
+}
+
+impl StallWatch {
+    fn new(rounds: usize, joints: Vec<Vector3<f64>>) -> StallWatch {
+        StallWatch {
+            rounds,
+            history: std::collections::VecDeque::from([(joints, 0.0)]),
+        }
+    }
+
+    /// Records the joints after a round; returns the round's largest joint motion, metres.
+    fn push(&mut self, joints: Vec<Vector3<f64>>) -> f64 {
+        let last = &self.history.back().expect("never empty").0;
+        let moved = largest_distance(last, &joints);
+        self.history.push_back((joints, moved));
+        if self.history.len() > self.rounds + 1 {
+            self.history.pop_front();
+        }
+        moved
+    }
+
+    /// Whether the last `rounds` rounds ended nearer than [`STALL_RATIO`] of their summed
+    /// motion to where they began.
+    fn stalled(&self) -> bool {
+        if self.rounds == 0 || self.history.len() <= self.rounds {
+            return false;
+        }
+        let first = &self.history.front().expect("never empty").0;
+        let last = &self.history.back().expect("never empty").0;
+        let travelled: f64 = self.history.iter().skip(1).map(|h| h.1).sum();
+        largest_distance(first, last) < STALL_RATIO * travelled
+    }
+}
+
+/// The largest distance between corresponding points, metres.
+fn largest_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).norm())
         .fold(0.0, f64::max)
 }
 
@@ -917,6 +982,26 @@ mod tests {
     use super::*;
     use crate::skeleton::skinning::tests::chain;
     use nalgebra::Rotation3;
+
+    /// Rounds that go back and forth stall; rounds that slide one way, however slowly, or
+    /// that are fewer than the window, do not; 0 rounds never stalls.
+    #[test]
+    fn stall_watch_tells_circling_from_sliding() {
+        let point = |x: f64| vec![Vector3::new(x, 0.0, 0.0)];
+        let mut circling = StallWatch::new(20, point(0.0));
+        let mut sliding = StallWatch::new(20, point(0.0));
+        let mut off = StallWatch::new(0, point(0.0));
+        for k in 1..=40 {
+            // 0.5 mm steps to and fro, drifting 1 um per round.
+            let to_and_fro = if k % 2 == 1 { 0.0005 } else { 0.0 } + 1e-6 * k as f64;
+            let moved = circling.push(point(to_and_fro));
+            assert!(moved > 0.0004 && moved < 0.0006);
+            sliding.push(point(1e-5 * k as f64));
+            off.push(point(to_and_fro));
+            assert_eq!(circling.stalled(), k >= 20, "round {k}");
+            assert!(!sliding.stalled() && !off.stalled(), "round {k}");
+        }
+    }
 
     /// A bone folded back is measured from the nearer of the two reference poses; turning a
     /// parent turns its child's direction too, and a root translation turns nothing.

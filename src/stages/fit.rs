@@ -104,14 +104,16 @@ pub fn track(
     frames: &[u32],
     params: &crate::fit::FitParams,
     progress: &dyn Fn(u32),
-) -> Result<Vec<(u32, FitResult)>> {
+) -> Result<Tracked> {
     let model = super::model::load(ctx)?;
     let t0 = model.skeleton.reference_frame;
     let fitter = Fitter::new(&model, params.clone());
     let mut done: std::collections::HashMap<u32, (Pose, f64)> = Default::default();
     let mut out = Vec::with_capacity(frames.len());
+    let mut seconds = Vec::with_capacity(frames.len());
     for &frame in frames {
         let obs = observation(ctx, frame)?;
+        let started = std::time::Instant::now();
         let result = if frame == t0 {
             fitter.reference(obs.vertices.len())
         } else {
@@ -127,12 +129,27 @@ pub fn track(
                 .map(|x| x.0.clone());
             fitter.fit_tracked(&obs, &start, before.as_ref(), Some(energy))
         };
+        seconds.push((frame, started.elapsed().as_secs_f64()));
         done.insert(frame, (result.pose.clone(), result.diagnostics.energy));
         out.push((frame, result));
         progress(frame);
     }
     out.sort_by_key(|x| x.0);
-    Ok(out)
+    Ok(Tracked {
+        results: out,
+        seconds,
+        steps: fitter.timings(),
+    })
+}
+
+/// What [`track`] computed, and how long it took.
+pub struct Tracked {
+    /// Every frame's fit, in frame order.
+    pub results: Vec<(u32, FitResult)>,
+    /// Seconds each frame's fit took (loading excluded), in computation order.
+    pub seconds: Vec<(u32, f64)>,
+    /// Seconds spent in each step of the rounds, summed over all frames.
+    pub steps: Vec<(&'static str, f64)>,
 }
 
 pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
