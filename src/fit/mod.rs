@@ -172,7 +172,7 @@ pub struct FitParams {
     /// A frame's rounds also stop (status `stalled`) when, over this many rounds, no joint
     /// ended farther than a fifth ([`STALL_RATIO`]) of the distance the joints moved in
     /// them from where it began: the rounds circle in one place instead of converging.
-    /// 0 turns it off. Default 100.
+    /// 0 (the default) turns it off.
     pub stall_rounds: usize,
     /// Frames whose observed surface has fewer vertices than this share of the model's keep
     /// the previous pose (and are flagged). Default 0.05.
@@ -211,7 +211,7 @@ impl Default for FitParams {
             acceleration: 5,
             sample_spacing: 0.01,
             tolerance: 0.00001,
-            stall_rounds: 100,
+            stall_rounds: 0,
             min_observed_share: 0.05,
             restarts: true,
             restart_energy_ratio: 3.0,
