@@ -37,8 +37,6 @@ pub struct HeldProblem<'a> {
     rigid: Vec<RigidMoments>,
     /// Indices (into `targets.pulls`) of the blended vertices, summed one by one.
     blended: Vec<u32>,
-    /// Indices of every pull (the tangential H needs each vertex's normal).
-    all: Vec<u32>,
 }
 
 impl<'a> HeldProblem<'a> {
@@ -76,7 +74,6 @@ impl<'a> HeldProblem<'a> {
             targets,
             rigid,
             blended,
-            all: (0..pulls.len() as u32).collect(),
         }
     }
 
@@ -113,9 +110,15 @@ impl<'a> HeldProblem<'a> {
         tangential: f64,
     ) -> (DMatrix<f64>, DVector<f64>, f64) {
         if tangential < 1.0 {
-            return self.summed(pose, tangential, &self.all, &[]);
+            // The tangential H needs each vertex's normal: every pull one by one.
+            return self.summed(pose, tangential, &self.every_pull(), &[]);
         }
         self.summed(pose, 1.0, &self.blended, &self.rigid)
+    }
+
+    /// Indices of every pull.
+    fn every_pull(&self) -> Vec<u32> {
+        (0..self.targets.pulls.len() as u32).collect()
     }
 
     /// The normal equations of the pulls `each` summed vertex by vertex and of `rigid` in
@@ -307,7 +310,7 @@ pub fn damped_step(h: &DMatrix<f64>, g: &DVector<f64>, lambda: f64) -> Option<DV
 mod tests {
     use super::*;
     use crate::skeleton::skinning::skin_weights;
-    use crate::skeleton::skinning::tests::chain;
+    use crate::skeleton::skinning::tests::{chain, signed_uniform};
     use nalgebra::Rotation3;
 
     /// The closed-form sums of the rigidly attached vertices give the same energy, gradient
@@ -316,11 +319,7 @@ mod tests {
     fn rigid_moments_match_the_sum_over_vertices() {
         let p = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
         let skeleton = chain();
-        let mut state = 777u64;
-        let mut rnd = move || {
-            state = crate::synth::rng::mix64(state);
-            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = signed_uniform(777);
         let rest: Vec<Vector3<f64>> = (0..3000)
             .map(|_| p(0.7 * rnd(), 0.1 * rnd(), 1.0 + 0.4 * rnd().abs()))
             .collect();
@@ -345,7 +344,7 @@ mod tests {
                 *r = Rotation3::new(p(rnd(), rnd(), rnd()) * 0.4);
             }
             let (h, g, e) = problem.normal_equations(&pose, 1.0);
-            let (h1, g1, e1) = problem.summed(&pose, 1.0, &problem.all, &[]);
+            let (h1, g1, e1) = problem.summed(&pose, 1.0, &problem.every_pull(), &[]);
             let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-9 * scale;
             assert!(close(e, e1, e1), "{e} {e1}");
             assert!(close(problem.energy(&pose), e1, e1));

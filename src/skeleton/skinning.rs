@@ -178,6 +178,15 @@ pub(crate) mod tests {
     use crate::skeleton::{Bone, Pose};
     use nalgebra::Rotation3;
 
+    /// Repeatable numbers uniform in [-1, 1) for tests, from `seed`.
+    pub(crate) fn signed_uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            state = crate::synth::rng::mix64(state);
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        }
+    }
+
     /// A small branching skeleton (root, a two-bone arm and a one-bone arm) for tests.
     pub(crate) fn chain() -> Skeleton {
         let p = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
@@ -202,11 +211,7 @@ pub(crate) mod tests {
     #[test]
     fn jacobians_match_finite_differences() {
         let skel = chain();
-        let mut state = 12345u64;
-        let mut rnd = move || {
-            state = crate::synth::rng::mix64(state);
-            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = signed_uniform(12345);
         let vertices: Vec<Vector3<f64>> = (0..40)
             .map(|_| Vector3::new(0.5 * rnd(), 0.1 * rnd(), 1.0 + 0.4 * rnd().abs()))
             .collect();
