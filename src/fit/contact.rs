@@ -12,11 +12,12 @@
 //!
 //! Exact, and fast: beyond a cut-off distance rho_c > 1 - 1e-4 and is taken as 1, so each
 //! vertex only needs the allowed vertices near it. Those are listed with one k-d tree per
-//! part (parts whose bounding box lies farther are not searched) at a slightly wider radius,
-//! and the lists serve the following rounds until the pose has moved enough to need new
-//! ones.
+//! part (parts whose bounding box lies farther are not searched): the candidates that could
+//! still be the nearest after a small motion. Each vertex's list serves the following
+//! rounds until it or the parts near it have moved enough to need a new one; only those
+//! vertices' lists are built again.
 
-use crate::geometry::nearest::{tree_distance2, NearestTree};
+use crate::geometry::nearest::{key, key_distance2, tree_distance2, NearestTree};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::skinning::joint_neighbours;
 use nalgebra::Vector3;
@@ -66,21 +67,49 @@ pub struct ContactSearch {
     searched: Vec<Vec<bool>>,
     /// Beyond this distance rho_c > 1 - 1e-4 and is taken as 1, metres.
     cutoff: f64,
-    /// Every vertex's possible partners, kept from round to round while the pose changes
-    /// little (`None` before the first call).
+    /// Every vertex's possible partners, kept from round to round while they serve
+    /// (`None` before the first call).
     partners: Mutex<Option<PartnerLists>>,
 }
 
-/// How much farther than the cut-off partner lists reach, metres: the lists stay valid
-/// until some vertex has moved half of it.
-const PARTNER_MARGIN: f64 = 0.02;
+/// The partner lists' margin m, metres: a vertex's list holds the allowed vertices within
+/// min(nearest + 2 m, cut-off + m) of it, and serves while it and the parts near it have
+/// moved less than m (see [`ContactSearch::weights`]).
+const PARTNER_MARGIN: f64 = 0.015;
 
-/// Partner lists in compressed rows: vertex v's are `partners[start[v]..start[v + 1]]`.
+/// At most this many poses at which lists were built are kept; beyond it, every list is
+/// rebuilt at the current pose.
+const MAX_EPOCHS: usize = 8;
+
+/// Every vertex's possible partners, built at earlier poses ("epochs").
 struct PartnerLists {
-    /// The posed vertices the lists were built at, metres.
-    posed: Vec<Vector3<f64>>,
-    start: Vec<u32>,
-    partners: Vec<u32>,
+    /// The posed vertices at each epoch, metres.
+    epochs: Vec<Vec<Vector3<f64>>>,
+    /// The epoch each vertex's list was built at.
+    epoch_of: Vec<u8>,
+    /// Bit b: part b's bounding box lay within cut-off + 2 m of the vertex when its list
+    /// was built (parts from the 64th on always count as near).
+    near: Vec<u64>,
+    lists: Vec<Vec<u32>>,
+}
+
+/// The posed parts' k-d trees and bounding boxes, for building lists at one pose.
+struct PosedParts {
+    trees: Vec<NearestTree>,
+    boxes: Vec<(Vector3<f64>, Vector3<f64>)>,
+}
+
+/// Distance from `q` to the box `(lo, hi)` (0 inside), metres.
+fn box_gap(q: &Vector3<f64>, (lo, hi): &(Vector3<f64>, Vector3<f64>)) -> f64 {
+    (lo - q).sup(&(q - hi)).sup(&Vector3::zeros()).norm()
+}
+
+fn part_bit(b: usize) -> u64 {
+    if b < 64 {
+        1 << b
+    } else {
+        0
+    }
 }
 
 impl ContactSearch {
@@ -115,42 +144,59 @@ impl ContactSearch {
 
     /// rho_c of every vertex of the model posed at `posed` with vertex `normals`.
     ///
-    /// The partners a vertex may have within the cut-off are taken from a list built at an
-    /// earlier pose with the cut-off widened by [`PARTNER_MARGIN`]; the list is rebuilt when
-    /// some vertex has since moved more than half the margin. Exact: two vertices now within
-    /// the cut-off were within cut-off + margin then, as each moved at most margin / 2.
+    /// Exact, with partner lists kept from earlier rounds. Let vertex v's list be built when
+    /// its nearest allowed vertex lay at d0, holding every allowed vertex then within
+    /// r = min(d0 + 2 m, cut-off + m). Since then v moved dv and each part b's vertices at
+    /// most D_b; a pair's distance changed by at most s_b = dv + D_b. The list still holds
+    /// v's nearest allowed vertex w whenever that lies within the cut-off, provided s_b <= m
+    /// for the parts b that were near v (box within cut-off + 2 m) and s_b < 2 m for the
+    /// others: w's part was near (else it is still beyond cut-off + 2 m - s_b > cut-off),
+    /// and w then lay within d1(w) + m <= d1(old nearest) + m <= d0 + 2 m, and within
+    /// cut-off + m. Vertices whose lists fail this get new lists at the current pose.
     pub fn weights(&self, posed: &[Vector3<f64>], normals: &[Vector3<f64>]) -> Vec<f64> {
         let mut cache = self
             .partners
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
-        let fresh = cache.as_ref().is_some_and(|c| {
-            c.posed.len() == posed.len()
-                && c.posed
-                    .par_iter()
-                    .zip(posed)
-                    .all(|(a, b)| (a - b).norm_squared() <= (0.5 * PARTNER_MARGIN).powi(2))
-        });
-        if !fresh {
-            *cache = Some(self.partner_lists(posed, self.cutoff + PARTNER_MARGIN));
+        let stale: Vec<u32> = match cache.as_ref() {
+            Some(c) if c.epoch_of.len() == posed.len() => self.stale_lists(c, posed),
+            _ => (0..posed.len() as u32).collect(),
+        };
+        if !stale.is_empty() {
+            let c = match cache.as_mut() {
+                Some(c) if c.epoch_of.len() == posed.len() => c,
+                _ => cache.insert(PartnerLists {
+                    epochs: Vec::new(),
+                    epoch_of: vec![0; posed.len()],
+                    near: vec![0; posed.len()],
+                    lists: vec![Vec::new(); posed.len()],
+                }),
+            };
+            if c.epochs.len() < MAX_EPOCHS {
+                self.renew(c, &stale, posed);
+            } else {
+                let all: Vec<u32> = (0..posed.len() as u32).collect();
+                self.renew(c, &all, posed);
+            }
         }
         let lists = cache.as_ref().expect("partner lists were just built");
         let cutoff2 = self.cutoff * self.cutoff;
+        let keys: Vec<[f32; 3]> = posed.par_iter().map(key).collect();
         (0..posed.len())
             .into_par_iter()
             .map(|v| {
                 let q = &posed[v];
-                let partners =
-                    &lists.partners[lists.start[v] as usize..lists.start[v + 1] as usize];
-                let best = partners
-                    .iter()
-                    .map(|&w| (w as usize, tree_distance2(q, &posed[w as usize])))
-                    .fold(None, |best: Option<(usize, f64)>, (w, d2)| match best {
-                        Some((_, b2)) if b2 <= d2 => best,
-                        _ => Some((w, d2)),
-                    });
-                match best {
-                    Some((w, d2)) if d2 <= cutoff2 => {
+                // The lists are in index order: among equally near partners the first
+                // (lowest index) is kept, whatever order the lists were found in.
+                let (mut best2, mut best) = (f64::INFINITY, usize::MAX);
+                for &w in &lists.lists[v] {
+                    let d2 = key_distance2(&keys[v], &keys[w as usize]);
+                    if d2 < best2 {
+                        (best2, best) = (d2, w as usize);
+                    }
+                }
+                match (best2, best) {
+                    (d2, w) if d2 <= cutoff2 => {
                         let d = d2.sqrt();
                         let signed = if (q - posed[w]).dot(&normals[w]) >= 0.0 {
                             d
@@ -165,16 +211,95 @@ impl ContactSearch {
             .collect()
     }
 
-    /// For every vertex, the vertices the rule allows as its partner that lie within
-    /// `radius` metres of it at `posed`.
-    fn partner_lists(&self, posed: &[Vector3<f64>], radius: f64) -> PartnerLists {
+    /// The vertices whose lists no longer serve at `posed` (see [`Self::weights`]).
+    fn stale_lists(&self, c: &PartnerLists, posed: &[Vector3<f64>]) -> Vec<u32> {
+        let nb = self.parts.len();
+        // moved[e][b]: the farthest any vertex of part b moved since epoch e.
+        let moved: Vec<Vec<f64>> = c
+            .epochs
+            .iter()
+            .map(|then| {
+                self.parts
+                    .par_iter()
+                    .map(|ids| {
+                        ids.iter()
+                            .map(|&i| (posed[i as usize] - then[i as usize]).norm_squared())
+                            .fold(0.0, f64::max)
+                            .sqrt()
+                    })
+                    .collect()
+            })
+            .collect();
+        let m = PARTNER_MARGIN;
+        (0..posed.len() as u32)
+            .into_par_iter()
+            .filter(|&v| {
+                let v = v as usize;
+                let e = c.epoch_of[v] as usize;
+                let dv = (posed[v] - c.epochs[e][v]).norm();
+                let searched = &self.searched[self.labels[v]];
+                (0..nb).any(|b| {
+                    let s = dv + moved[e][b];
+                    let near = b >= 64 || c.near[v] & part_bit(b) != 0;
+                    searched[b] && if near { s > m } else { s >= 2.0 * m }
+                })
+            })
+            .collect()
+    }
+
+    /// Builds new lists for the vertices `ids` at `posed`, as a new epoch, and drops the
+    /// epochs no list refers to any more.
+    fn renew(&self, c: &mut PartnerLists, ids: &[u32], posed: &[Vector3<f64>]) {
+        let parts = self.posed_parts(posed);
+        let built: Vec<(u64, Vec<u32>)> = ids
+            .par_iter()
+            .map(|&v| {
+                // The old list's nearest partner now bounds how far the nearest one lies.
+                let bound = c.lists[v as usize]
+                    .iter()
+                    .map(|&w| tree_distance2(&posed[v as usize], &posed[w as usize]))
+                    .fold(f64::INFINITY, f64::min)
+                    .sqrt();
+                self.partner_list(&parts, posed, v as usize, bound)
+            })
+            .collect();
+        let epoch = c.epochs.len() as u8;
+        c.epochs.push(posed.to_vec());
+        for (&v, (near, list)) in ids.iter().zip(built) {
+            let v = v as usize;
+            c.epoch_of[v] = epoch;
+            c.near[v] = near;
+            c.lists[v] = list;
+        }
+        // Renumber the epochs still in use.
+        let mut used = vec![false; c.epochs.len()];
+        for &e in &c.epoch_of {
+            used[e as usize] = true;
+        }
+        let mut renumber = vec![0u8; c.epochs.len()];
+        let mut kept = 0u8;
+        for (e, &u) in used.iter().enumerate() {
+            renumber[e] = kept;
+            kept += u as u8;
+        }
+        let mut e = 0;
+        c.epochs.retain(|_| {
+            e += 1;
+            used[e - 1]
+        });
+        for x in &mut c.epoch_of {
+            *x = renumber[*x as usize];
+        }
+    }
+
+    fn posed_parts(&self, posed: &[Vector3<f64>]) -> PosedParts {
         let points: Vec<Vec<Vector3<f64>>> = self
             .parts
             .iter()
             .map(|ids| ids.iter().map(|&i| posed[i as usize]).collect())
             .collect();
-        let trees: Vec<NearestTree> = points.par_iter().map(|p| NearestTree::new(p)).collect();
-        let boxes: Vec<(Vector3<f64>, Vector3<f64>)> = points
+        let trees = points.par_iter().map(|p| NearestTree::new(p)).collect();
+        let boxes = points
             .iter()
             .map(|p| {
                 p.iter().fold(
@@ -186,47 +311,64 @@ impl ContactSearch {
                 )
             })
             .collect();
+        PosedParts { trees, boxes }
+    }
+
+    /// Vertex v's near parts (bits) and list at `posed`: the allowed vertices within
+    /// min(nearest + 2 m, cut-off + m). `bound`: a distance the nearest allowed vertex is
+    /// known to lie within, metres (infinity when none is known).
+    fn partner_list(
+        &self,
+        parts: &PosedParts,
+        posed: &[Vector3<f64>],
+        v: usize,
+        bound: f64,
+    ) -> (u64, Vec<u32>) {
+        let m = PARTNER_MARGIN;
+        let q = &posed[v];
         let rest_d2 = self.params.rest_distance.powi(2);
-        // The trees hold f32 coordinates: a little slack keeps every point within `radius`.
-        let search = radius * (1.0 + 1e-5) + 1e-6;
-        let per_vertex: Vec<Vec<u32>> = (0..posed.len())
-            .into_par_iter()
-            .map(|v| {
-                let q = &posed[v];
-                let mut found = Vec::new();
-                for (b, tree) in trees.iter().enumerate() {
-                    if !self.searched[self.labels[v]][b] {
-                        continue;
-                    }
-                    let (lo, hi) = &boxes[b];
-                    let gap = (lo - q).sup(&(q - hi)).sup(&Vector3::zeros()).norm();
-                    if gap > search {
-                        continue;
-                    }
-                    tree.within(q, search, |k, _| {
-                        let w = self.parts[b][k];
-                        if self.params.rule == ContactRule::Adjacent
-                            || (self.rest[w as usize] - self.rest[v]).norm_squared() > rest_d2
-                        {
-                            found.push(w);
-                        }
-                    });
+        let reach = self.cutoff + m;
+        // The trees hold f32 coordinates: a little slack keeps every point within reach.
+        let slack = |r: f64| r * (1.0 + 1e-5) + 1e-6;
+        // Only vertices within the nearest's distance + 2 m are listed: with an upper bound
+        // on that distance, nothing farther needs visiting.
+        let search = slack((bound + 2.0 * m).min(reach));
+        let mut near = 0u64;
+        let mut found: Vec<(u32, f64)> = Vec::new();
+        for (b, tree) in parts.trees.iter().enumerate() {
+            if !self.searched[self.labels[v]][b] {
+                continue;
+            }
+            let gap = box_gap(q, &parts.boxes[b]);
+            if gap <= reach + m {
+                near |= part_bit(b);
+            }
+            if gap > search {
+                continue;
+            }
+            tree.within(q, search, |k, d2| {
+                let w = self.parts[b][k];
+                if self.params.rule == ContactRule::Adjacent
+                    || (self.rest[w as usize] - self.rest[v]).norm_squared() > rest_d2
+                {
+                    found.push((w, d2));
                 }
-                found
-            })
+            });
+        }
+        let nearest = found
+            .iter()
+            .map(|x| x.1)
+            .fold(f64::INFINITY, f64::min)
+            .sqrt();
+        let r = slack((nearest + 2.0 * m).min(reach));
+        let mut list: Vec<u32> = found
+            .into_iter()
+            .filter(|&(_, d2)| d2 <= r * r)
+            .map(|(w, _)| w)
             .collect();
-        let mut start = Vec::with_capacity(posed.len() + 1);
-        start.push(0u32);
-        let mut partners = Vec::new();
-        for list in per_vertex {
-            partners.extend(list);
-            start.push(partners.len() as u32);
-        }
-        PartnerLists {
-            posed: posed.to_vec(),
-            start,
-            partners,
-        }
+        // In memory order, for the scans.
+        list.sort_unstable();
+        (near, list)
     }
 }
 
@@ -358,7 +500,8 @@ mod tests {
             };
             let search = ContactSearch::new(&model, p);
             // The last bone moves rigidly towards the first by growing steps (0.5 mm up to
-            // 6 cm, 12.8 cm in all: they touch, then press into each other).
+            // 6 cm, 12.8 cm in all: they touch, then press into each other), while the first
+            // sways along x by 0-8 mm: lists go stale in some places and not others.
             let mut shift = 0.0;
             for step in 0..12 {
                 shift += 0.0005 * 1.5f64.powi(step);
@@ -367,7 +510,11 @@ mod tests {
                     .vertices
                     .iter()
                     .zip(&model.labels)
-                    .map(|(x, &l)| if l == 2 { x - shift * Vector3::y() } else { *x })
+                    .map(|(x, &l)| match l {
+                        0 => x + 0.004 * (step % 3) as f64 * Vector3::x(),
+                        2 => x - shift * Vector3::y(),
+                        _ => *x,
+                    })
                     .collect();
                 let got = search.weights(&posed, &normals);
                 let want = brute(&model, &p, &posed, &normals);

@@ -11,21 +11,26 @@ pub struct NearestTree {
     tree: Option<ImmutableKdTree<f32, 3>>,
 }
 
-fn key(p: &Vector3<f64>) -> [f32; 3] {
+/// A point as the tree stores it (f32 coordinates).
+pub fn key(p: &Vector3<f64>) -> [f32; 3] {
     [p.x as f32, p.y as f32, p.z as f32]
 }
 
-/// The squared distance between `a` and `b` exactly as the tree measures it (f32
-/// coordinates, the axes summed in order), m^2: a search that replaces a tree query then
-/// picks the same point.
-pub fn tree_distance2(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    let (a, b) = (key(a), key(b));
+/// [`tree_distance2`] between points already turned to [`key`]s, m^2.
+pub fn key_distance2(a: &[f32; 3], b: &[f32; 3]) -> f64 {
     let mut sum = 0.0f32;
     for axis in 0..3 {
         let d = a[axis] - b[axis];
         sum += d * d;
     }
     sum as f64
+}
+
+/// The squared distance between `a` and `b` exactly as the tree measures it (f32
+/// coordinates, the axes summed in order), m^2: a search that replaces a tree query then
+/// picks the same point.
+pub fn tree_distance2(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    key_distance2(&key(a), &key(b))
 }
 
 impl NearestTree {
