@@ -336,7 +336,7 @@ pub fn nearest(points: usize, queries: usize) -> String {
 /// The fit stage's tracking over the job's frames, in memory, with `method` overriding
 /// fit.method: seconds, rounds and status per frame, then milliseconds per round of each
 /// step and the mean seconds per tracked frame.
-pub fn track(job: &Job, method: Option<&str>) -> Result<String> {
+pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) -> Result<String> {
     let ctx = job.context();
     let mut params = job.config.fit.clone();
     if let Some(name) = method {
@@ -357,22 +357,25 @@ pub fn track(job: &Job, method: Option<&str>) -> Result<String> {
         )));
     }
     let tracked = crate::stages::fit::track(&ctx, &frames, &params, &|_| ())?;
+    let model = crate::stages::model::load(&ctx)?;
+    let rows: Vec<_> = tracked
+        .results
+        .iter()
+        .flat_map(|(f, r)| crate::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
+        .collect();
+    if let Some(path) = joints {
+        crate::joints::write(path, &rows)?;
+    }
     // With ground truth, each frame's mean joint error (cm).
     let errors: Vec<(u32, f64)> = match job.sequence.ground_truth_joints()? {
         Some(truth) => {
-            let model = crate::stages::model::load(&ctx)?;
-            let rows: Vec<_> = tracked
-                .results
-                .iter()
-                .flat_map(|(f, r)| crate::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
-                .collect();
             let path = job.sequence.dir.join("ground_truth/joints.csv");
             crate::eval::pose::joint_errors(&truth, &rows, &path)?
         }
         None => Vec::new(),
     };
     let mut out = format!(
-        "tracking, method {}, sample_spacing {} m\n  frame  seconds  rounds  error_cm  status\n",
+        "tracking, method {}, sample_spacing {} m\n  frame  seconds  rounds  error_cm     rms_mm  status\n",
         params.method.name(),
         params.sample_spacing
     );
@@ -388,8 +391,9 @@ pub fn track(job: &Job, method: Option<&str>) -> Result<String> {
             .map_or("-".to_string(), |e| format!("{:.2}", e.1 * 100.0));
         let _ = writeln!(
             out,
-            "  {frame:>5} {secs:>8.3} {:>7} {error:>9}  {}",
+            "  {frame:>5} {secs:>8.3} {:>7} {error:>9} {:>10.3}  {}",
             d.iterations,
+            d.rms * 1e3,
             d.status.name()
         );
         if d.status != crate::fit::FitStatus::Reference {

@@ -250,6 +250,9 @@ enum BenchWhat {
         /// Override fit.method.
         #[arg(long)]
         method: Option<String>,
+        /// Also write the tracked joints here (the joints.csv schema).
+        #[arg(long)]
+        joints: Option<PathBuf>,
     },
     /// k-d tree nearest-neighbour queries per second (compare tools/bench_fit.py).
     Nearest {
@@ -485,9 +488,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
                 print!("{}", hullpose::bench::fit(&job, frame, spacing)?);
             }
-            BenchWhat::Track { file, method } => {
+            BenchWhat::Track {
+                file,
+                method,
+                joints,
+            } => {
                 let job = Job::load(Config::load(&file)?, None)?;
-                print!("{}", hullpose::bench::track(&job, method.as_deref())?);
+                print!(
+                    "{}",
+                    hullpose::bench::track(&job, method.as_deref(), joints.as_deref())?
+                );
             }
             BenchWhat::Nearest { points, queries } => {
                 print!("{}", hullpose::bench::nearest(points, queries))

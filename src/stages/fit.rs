@@ -130,7 +130,8 @@ pub fn track(
             fitter.fit_tracked(&obs, &start, before.as_ref(), Some(energy))
         };
         seconds.push((frame, started.elapsed().as_secs_f64()));
-        done.insert(frame, (result.pose.clone(), result.diagnostics.energy));
+        let carried = as_cached(&model.skeleton, frame, &result.pose)?;
+        done.insert(frame, (carried, result.diagnostics.energy));
         out.push((frame, result));
         progress(frame);
     }
@@ -140,6 +141,18 @@ pub fn track(
         seconds,
         steps: fitter.timings(),
     })
+}
+
+/// `pose` as the next frame's fit reads it back from the cache (poses.csv's rotation
+/// vectors), so that tracking in memory starts every frame exactly where a stage run does:
+/// hard frames are sensitive to differences at the level of rounding.
+fn as_cached(skeleton: &Skeleton, frame: u32, pose: &Pose) -> Result<Pose> {
+    let text = crate::poses::to_csv(skeleton, &[(frame, pose.clone())]);
+    let parsed = crate::poses::parse(Path::new("(tracked pose)"), &text, skeleton)?;
+    Ok(parsed
+        .into_iter()
+        .next()
+        .map_or_else(|| pose.clone(), |p| p.1))
 }
 
 /// What [`track`] computed, and how long it took.
