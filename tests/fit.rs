@@ -1,6 +1,7 @@
 //! Stage 6 on exact observations: with the true surface observed, the fit recovers the
 //! true pose from the previous frame's (with either solver); a frame without observation keeps the previous pose
-//! and is flagged; damaged observations never put NaN into a pose.
+//! and is flagged; damaged observations never put NaN into a pose; a lost fit's restarts
+//! never repeat a start.
 
 use hullpose::fit::{FitParams, FitStatus, Fitter, Method, Observation, Solver};
 use hullpose::skeleton::{pose::joints, Pose, Skeleton};
@@ -105,4 +106,22 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     assert!(r.pose.is_finite());
     assert!(r.diagnostics.energy.is_finite() && r.diagnostics.rms.is_finite());
     assert!(joint_error(&skeleton, &r.pose, &poses[5].1) < 0.004);
+    // A fit that hits the round cap is tried again from the other starts, each once: from
+    // the reference pose (the frame after t0) the other starts are that same pose, so none;
+    // with a frame further back, the previous pose and the reference pose at its root.
+    let capped = Fitter::new(
+        &model,
+        FitParams {
+            max_iterations: 2,
+            ..Default::default()
+        },
+    );
+    let obs = observe(&mesh(dir.path(), 1));
+    let reference = Pose::rest(skeleton.bones.len());
+    let r = capped.fit_tracked(&obs, &reference, None, Some(0.0));
+    assert_eq!(r.diagnostics.status, FitStatus::IterationCap);
+    assert_eq!(r.diagnostics.iterations, 2);
+    let obs = observe(&mesh(dir.path(), 6));
+    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(0.0));
+    assert_eq!(r.diagnostics.iterations, 6);
 }

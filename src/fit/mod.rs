@@ -180,8 +180,9 @@ pub struct FitParams {
     /// When a tracked frame's fit from its start hits the iteration cap or ends with more
     /// than `restart_energy_ratio` times the previous frame's energy, it is fitted again
     /// from two other starts (the other of `previous` and `predicted`, and the reference
-    /// pose at the previous root position) and the result with the lowest score is kept
-    /// (eq. 4 weighted by rho_p alone, [`Fitter::score`]). Default true.
+    /// pose at the previous root position; either is skipped when it equals a start
+    /// already tried) and the result with the lowest score is kept (eq. 4 weighted by rho_p
+    /// alone, [`Fitter::score`]). Default true.
     pub restarts: bool,
     /// See `restarts`. Default 3.
     pub restart_energy_ratio: f64,
@@ -514,10 +515,16 @@ impl<'a> Fitter<'a> {
         if !p.restarts || !lost {
             return best;
         }
-        let mut starts: Vec<Pose> = second.into_iter().collect();
         let mut rest = Pose::rest(previous.rotations.len());
         rest.translation = previous.translation;
-        starts.push(rest);
+        // A start already tried would end where it did (the fit is deterministic): at the
+        // frame after t0 the previous pose is the reference pose itself.
+        let mut starts: Vec<Pose> = Vec::new();
+        for start in second.into_iter().chain([rest]) {
+            if start != first && !starts.contains(&start) {
+                starts.push(start);
+            }
+        }
         let (mut rounds, mut steps) = (best.diagnostics.iterations, best.diagnostics.lm_steps);
         let mut best_score = self.score(&prepared, &best.pose);
         for start in &starts {
