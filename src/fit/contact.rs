@@ -104,6 +104,7 @@ fn box_gap(q: &Vector3<f64>, (lo, hi): &(Vector3<f64>, Vector3<f64>)) -> f64 {
     (lo - q).sup(&(q - hi)).sup(&Vector3::zeros()).norm()
 }
 
+/// Part b's bit in [`PartnerLists::near`] (none from the 64th part on).
 fn part_bit(b: usize) -> u64 {
     if b < 64 {
         1 << b
