@@ -356,7 +356,9 @@ pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) 
             job.sequence.dir.display()
         )));
     }
-    let tracked = crate::stages::fit::track(&ctx, &frames, &params, &|_| ())?;
+    let bar = crate::runner::bar(frames.len(), params.method.name());
+    let tracked = crate::stages::fit::track(&ctx, &frames, &params, &|_| bar.inc(1))?;
+    bar.finish_and_clear();
     let model = crate::stages::model::load(&ctx)?;
     let rows: Vec<_> = tracked
         .results

@@ -685,8 +685,7 @@ fn ablation(job: &Job, frames: Option<FrameRange>) -> anyhow::Result<()> {
             method,
             ..job.config.fit.clone()
         };
-        let bar = indicatif::ProgressBar::new(tracked.len() as u64);
-        bar.set_message(method.name());
+        let bar = hullpose::runner::bar(tracked.len(), method.name());
         let results =
             hullpose::stages::fit::track(&ctx, &tracked, &params, &|_| bar.inc(1))?.results;
         bar.finish_and_clear();

@@ -296,7 +296,9 @@ fn plan(opts: &RunOptions) -> Result<Vec<(&'static StageDef, bool)>> {
     Ok(plan)
 }
 
-fn bar(len: usize, stage: &str) -> ProgressBar {
+/// A progress bar over `len` frames labelled `stage` (drawn on stderr, hidden when that is
+/// not a terminal).
+pub fn bar(len: usize, stage: &str) -> ProgressBar {
     let bar = ProgressBar::new(len as u64);
     bar.set_style(
         ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} frames ({eta})")
