@@ -334,8 +334,9 @@ pub fn nearest(points: usize, queries: usize) -> String {
 }
 
 /// The fit stage's tracking over the job's frames, in memory, with `method` overriding
-/// fit.method: seconds, rounds and status per frame, then milliseconds per round of each
-/// step and the mean seconds per tracked frame.
+/// fit.method: seconds, rounds, joint error, residual and status per frame, then
+/// milliseconds per round of each step and the mean seconds per tracked frame; with
+/// `joints`, the tracked joints are written there (joints.csv).
 pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) -> Result<String> {
     let ctx = job.context();
     let mut params = job.config.fit.clone();

@@ -243,8 +243,9 @@ enum BenchWhat {
         spacing: Option<f64>,
     },
     /// The fit stage's tracking over the configured frames, in memory (needs the model and
-    /// every frame's reliability in the cache; nothing is written): seconds, rounds and (with
-    /// ground truth) mean joint error per frame, and milliseconds per round of each step.
+    /// every frame's reliability in the cache; nothing is written but `--joints`): seconds,
+    /// rounds, (with ground truth) mean joint error and residual per frame, and milliseconds
+    /// per round of each step; the same results as `pipeline run`.
     Track {
         file: PathBuf,
         /// Override fit.method.

@@ -17,7 +17,8 @@
 //! rounds until it or the parts near it have moved enough to need a new one; only those
 //! vertices' lists are built again.
 
-use crate::geometry::nearest::{key, key_distance2, tree_distance2, NearestTree};
+use crate::geometry::mesh::point_bounds;
+use crate::geometry::nearest::{key, key_distance2, NearestTree};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::skinning::joint_neighbours;
 use nalgebra::Vector3;
@@ -104,6 +105,21 @@ fn box_gap(q: &Vector3<f64>, (lo, hi): &(Vector3<f64>, Vector3<f64>)) -> f64 {
     (lo - q).sup(&(q - hi)).sup(&Vector3::zeros()).norm()
 }
 
+/// The squared distance (as the trees measure it, m^2) and index of the nearest of the
+/// `listed` vertices to vertex v; (infinity, `usize::MAX`) for none. Lists are in index
+/// order, so among equally near vertices the lowest index wins, whatever order the lists
+/// were found in.
+fn nearest_listed(listed: &[u32], keys: &[[f32; 3]], v: usize) -> (f64, usize) {
+    let (mut best2, mut best) = (f64::INFINITY, usize::MAX);
+    for &w in listed {
+        let d2 = key_distance2(&keys[v], &keys[w as usize]);
+        if d2 < best2 {
+            (best2, best) = (d2, w as usize);
+        }
+    }
+    (best2, best)
+}
+
 /// Part b's bit in [`PartnerLists::near`] (none from the 64th part on).
 fn part_bit(b: usize) -> u64 {
     if b < 64 {
@@ -163,6 +179,7 @@ impl ContactSearch {
             Some(c) if c.epoch_of.len() == posed.len() => self.stale_lists(c, posed),
             _ => (0..posed.len() as u32).collect(),
         };
+        let keys: Vec<[f32; 3]> = posed.par_iter().map(key).collect();
         if !stale.is_empty() {
             let c = match cache.as_mut() {
                 Some(c) if c.epoch_of.len() == posed.len() => c,
@@ -174,40 +191,28 @@ impl ContactSearch {
                 }),
             };
             if c.epochs.len() < MAX_EPOCHS {
-                self.renew(c, &stale, posed);
+                self.renew(c, &stale, posed, &keys);
             } else {
                 let all: Vec<u32> = (0..posed.len() as u32).collect();
-                self.renew(c, &all, posed);
+                self.renew(c, &all, posed, &keys);
             }
         }
         let lists = cache.as_ref().expect("partner lists were just built");
         let cutoff2 = self.cutoff * self.cutoff;
-        let keys: Vec<[f32; 3]> = posed.par_iter().map(key).collect();
         (0..posed.len())
             .into_par_iter()
             .map(|v| {
-                let q = &posed[v];
-                // The lists are in index order: among equally near partners the first
-                // (lowest index) is kept, whatever order the lists were found in.
-                let (mut best2, mut best) = (f64::INFINITY, usize::MAX);
-                for &w in &lists.lists[v] {
-                    let d2 = key_distance2(&keys[v], &keys[w as usize]);
-                    if d2 < best2 {
-                        (best2, best) = (d2, w as usize);
-                    }
+                let (d2, w) = nearest_listed(&lists.lists[v], &keys, v);
+                if d2 > cutoff2 {
+                    return 1.0;
                 }
-                match (best2, best) {
-                    (d2, w) if d2 <= cutoff2 => {
-                        let d = d2.sqrt();
-                        let signed = if (q - posed[w]).dot(&normals[w]) >= 0.0 {
-                            d
-                        } else {
-                            -d
-                        };
-                        rho_c(signed, &self.params)
-                    }
-                    _ => 1.0,
-                }
+                let d = d2.sqrt();
+                let signed = if (posed[v] - posed[w]).dot(&normals[w]) >= 0.0 {
+                    d
+                } else {
+                    -d
+                };
+                rho_c(signed, &self.params)
             })
             .collect()
     }
@@ -250,18 +255,16 @@ impl ContactSearch {
 
     /// Builds new lists for the vertices `ids` at `posed`, as a new epoch, and drops the
     /// epochs no list refers to any more.
-    fn renew(&self, c: &mut PartnerLists, ids: &[u32], posed: &[Vector3<f64>]) {
+    /// `keys`: `posed` as the trees store it.
+    fn renew(&self, c: &mut PartnerLists, ids: &[u32], posed: &[Vector3<f64>], keys: &[[f32; 3]]) {
         let parts = self.posed_parts(posed);
         let built: Vec<(u64, Vec<u32>)> = ids
             .par_iter()
             .map(|&v| {
+                let v = v as usize;
                 // The old list's nearest partner now bounds how far the nearest one lies.
-                let bound = c.lists[v as usize]
-                    .iter()
-                    .map(|&w| tree_distance2(&posed[v as usize], &posed[w as usize]))
-                    .fold(f64::INFINITY, f64::min)
-                    .sqrt();
-                self.partner_list(&parts, posed, v as usize, bound)
+                let bound = nearest_listed(&c.lists[v], keys, v).0.sqrt();
+                self.partner_list(&parts, posed, v, bound)
             })
             .collect();
         let epoch = c.epochs.len() as u8;
@@ -272,22 +275,22 @@ impl ContactSearch {
             c.near[v] = near;
             c.lists[v] = list;
         }
-        // Renumber the epochs still in use.
+        // Drop the epochs no list refers to and renumber the rest.
         let mut used = vec![false; c.epochs.len()];
         for &e in &c.epoch_of {
             used[e as usize] = true;
         }
-        let mut renumber = vec![0u8; c.epochs.len()];
-        let mut kept = 0u8;
-        for (e, &u) in used.iter().enumerate() {
-            renumber[e] = kept;
-            kept += u as u8;
-        }
-        let mut e = 0;
-        c.epochs.retain(|_| {
-            e += 1;
-            used[e - 1]
-        });
+        let renumber: Vec<u8> = used
+            .iter()
+            .scan(0u8, |kept, &u| {
+                let at = *kept;
+                *kept += u as u8;
+                Some(at)
+            })
+            .collect();
+        let mut in_use = used.iter();
+        c.epochs
+            .retain(|_| *in_use.next().expect("one flag per epoch"));
         for x in &mut c.epoch_of {
             *x = renumber[*x as usize];
         }
@@ -300,17 +303,10 @@ impl ContactSearch {
             .map(|ids| ids.iter().map(|&i| posed[i as usize]).collect())
             .collect();
         let trees = points.par_iter().map(|p| NearestTree::new(p)).collect();
+        // An empty part is never searched: its box is never read.
         let boxes = points
             .iter()
-            .map(|p| {
-                p.iter().fold(
-                    (
-                        Vector3::repeat(f64::INFINITY),
-                        Vector3::repeat(f64::NEG_INFINITY),
-                    ),
-                    |(lo, hi), x| (lo.inf(x), hi.sup(x)),
-                )
-            })
+            .map(|p| point_bounds(p).unwrap_or((Vector3::zeros(), Vector3::zeros())))
             .collect();
         PosedParts { trees, boxes }
     }

@@ -64,12 +64,7 @@ impl TriMesh {
 
     /// Axis-aligned bounding box (min, max); `None` for an empty mesh.
     pub fn bounds(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
-        let first = *self.vertices.first()?;
-        Some(
-            self.vertices
-                .iter()
-                .fold((first, first), |(lo, hi), v| (lo.inf(v), hi.sup(v))),
-        )
+        point_bounds(&self.vertices)
     }
 
     /// Whether every edge is shared by exactly two triangles with opposite directions
@@ -86,4 +81,14 @@ impl TriMesh {
             .iter()
             .all(|(&(a, b), &n)| n == 1 && directed.get(&(b, a)) == Some(&1))
     }
+}
+
+/// Axis-aligned bounding box (min, max) of `points`; `None` for none.
+pub fn point_bounds(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let first = *points.first()?;
+    Some(
+        points
+            .iter()
+            .fold((first, first), |(lo, hi), v| (lo.inf(v), hi.sup(v))),
+    )
 }
