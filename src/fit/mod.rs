@@ -12,15 +12,17 @@
 
 mod anderson;
 pub mod contact;
+pub mod kept_nearest;
 mod moments;
 pub mod solve;
 
-use crate::geometry::nearest::NearestTree;
+use crate::geometry::nearest::{key, NearestTree};
 use crate::geometry::TriMesh;
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::skinning::pose_vertices;
 use crate::skeleton::{Pose, PosedBones, Skeleton};
 use contact::{ContactParams, ContactRule, ContactSearch};
+use kept_nearest::{MovingPoints, MovingQueries};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -384,6 +386,9 @@ pub struct Fitter<'a> {
     contact: ContactSearch,
     /// Seconds spent per step, summed over every fit (for benchmarks).
     timings: std::sync::Mutex<Vec<(&'static str, f64)>>,
+    /// Nearest answers reused from an earlier round and answers given, both ways, over
+    /// every fit (for benchmarks).
+    nearest_reuse: std::sync::Mutex<[usize; 4]>,
 }
 
 /// A frame's observation prepared for the rounds ([`Fitter::prepare`]).
@@ -391,6 +396,11 @@ struct Prepared {
     /// Finite observed vertices thinned to `sample_spacing`.
     obs: Observation,
     tree: NearestTree,
+    /// `obs`'s vertices as the trees store them.
+    keys: Vec<[f32; 3]>,
+    /// Nearest answers kept between this frame's rounds, both ways (every start's rounds
+    /// may share them: they hold for any pose).
+    kept: std::sync::Mutex<(MovingQueries, MovingPoints)>,
     /// Observed vertices before thinning (for the diagnostics).
     observed: usize,
 }
@@ -445,12 +455,23 @@ impl<'a> Fitter<'a> {
             sample_normals,
             contact,
             timings: Default::default(),
+            nearest_reuse: Default::default(),
         }
     }
 
     /// Seconds spent in each step so far, summed over every fit.
     pub fn timings(&self) -> Vec<(&'static str, f64)> {
         self.timings.lock().map(|t| t.clone()).unwrap_or_default()
+    }
+
+    /// The shares of nearest-neighbour answers reused from an earlier round
+    /// ([`kept_nearest`]), model->observed and observed->model, over every fit so far.
+    pub fn nearest_reused_share(&self) -> [f64; 2] {
+        let r = self.nearest_reuse.lock().map(|r| *r).unwrap_or_default();
+        [
+            r[0] as f64 / r[1].max(1) as f64,
+            r[2] as f64 / r[3].max(1) as f64,
+        ]
     }
 
     fn time<T>(&self, step: &'static str, f: impl FnOnce() -> T) -> T {
@@ -598,11 +619,14 @@ impl<'a> Fitter<'a> {
             normals: keep.iter().map(|&i| obs.normals[i]).collect(),
             rho_p: keep.iter().map(|&i| obs.rho_p[i]).collect(),
         };
-        let tree = NearestTree::new(&obs.vertices);
+        let keys: Vec<[f32; 3]> = obs.vertices.iter().map(key).collect();
+        let tree = NearestTree::from_keys(keys.clone());
         Some(Prepared {
             observed: input_count,
             obs,
             tree,
+            keys,
+            kept: Default::default(),
         })
     }
 
@@ -796,8 +820,8 @@ impl<'a> Fitter<'a> {
                 Method::Proposed => rho_c[v] * obs.rho_p[u],
             }
         };
-        // Each query point's partner in `tree`: the nearest, or with `compatible` the nearest
-        // whose normal agrees (`agrees(query, partner)`); (0, inf) for none.
+        // With `compatible`, each query point's nearest partner in `tree` whose normal agrees
+        // (`agrees(query, partner)`); (0, inf) for none.
         let partners = |queries: &[Vector3<f64>],
                         tree: &NearestTree,
                         agrees: &(dyn Fn(usize, usize) -> bool + Sync)|
@@ -806,24 +830,52 @@ impl<'a> Fitter<'a> {
                 .par_iter()
                 .enumerate()
                 .map(|(i, q)| {
-                    if compatible {
-                        tree.nearest_where(q, COMPATIBLE_SEARCH_LIMIT, |j| agrees(i, j))
-                    } else {
-                        tree.nearest(q)
-                    }
-                    .map_or((0, f64::INFINITY), |x| x)
+                    tree.nearest_where(q, COMPATIBLE_SEARCH_LIMIT, |j| agrees(i, j))
+                        .map_or((0, f64::INFINITY), |x| x)
                 })
                 .collect()
         };
-        // Model -> observed: each model vertex's nearest observed vertex.
-        let forward = self.time("nearest model->observed", || {
-            partners(&posed, obs_tree, &|v, u| agree(v, u))
-        });
-        // Observed -> model.
-        let model_tree = self.time("model tree", || NearestTree::new(&posed));
-        let backward = self.time("nearest observed->model", || {
-            partners(&obs.vertices, &model_tree, &|u, v| agree(v, u))
-        });
+        let (forward, backward) = if compatible {
+            // Model -> observed: each model vertex's nearest observed vertex whose normal
+            // agrees.
+            let forward = self.time("nearest model->observed", || {
+                partners(&posed, obs_tree, &|v, u| agree(v, u))
+            });
+            // Observed -> model.
+            let model_tree = self.time("model tree", || NearestTree::new(&posed));
+            let backward = self.time("nearest observed->model", || {
+                partners(&obs.vertices, &model_tree, &|u, v| agree(v, u))
+            });
+            (forward, backward)
+        } else {
+            // The nearest partners both ways, reusing the earlier rounds' answers that still
+            // hold ([`kept_nearest`]; the same answers as fresh searches).
+            let keys: Vec<[f32; 3]> = posed.iter().map(key).collect();
+            let mut guard = prepared.kept.lock().unwrap_or_else(|e| e.into_inner());
+            let (to_observed, to_model) = &mut *guard;
+            let reused_before = [to_observed.reused, to_model.reused];
+            let forward = self.time("nearest model->observed", || {
+                to_observed.partners(&keys, obs_tree)
+            });
+            let answers = self.time("nearest observed->model", || {
+                to_model.kept(&prepared.keys, &keys)
+            });
+            let backward = if answers.iter().all(|a| a.is_some()) {
+                answers.into_iter().flatten().collect()
+            } else {
+                let model_tree = self.time("model tree", || NearestTree::from_keys(keys.clone()));
+                self.time("nearest observed->model", || {
+                    to_model.search(&prepared.keys, &keys, &model_tree, answers)
+                })
+            };
+            if let Ok(mut r) = self.nearest_reuse.lock() {
+                r[0] += to_observed.reused - reused_before[0];
+                r[1] += forward.len();
+                r[2] += to_model.reused - reused_before[1];
+                r[3] += backward.len();
+            }
+            (forward, backward)
+        };
         let n = posed.len();
         let mut w_sum = vec![0.0; n];
         let mut target = vec![Vector3::zeros(); n];

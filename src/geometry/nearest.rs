@@ -9,6 +9,8 @@ use nalgebra::Vector3;
 pub struct NearestTree {
     /// `None` when built from no point (kiddo needs at least one).
     tree: Option<ImmutableKdTree<f32, 3>>,
+    /// The points as the tree stores them.
+    keys: Vec<[f32; 3]>,
 }
 
 /// A point as the tree stores it (f32 coordinates).
@@ -36,25 +38,54 @@ pub fn tree_distance2(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
 impl NearestTree {
     /// Indexes `points` (metres); index i answers for `points[i]`.
     pub fn new(points: &[Vector3<f64>]) -> NearestTree {
-        let keys: Vec<[f32; 3]> = points.iter().map(key).collect();
+        Self::from_keys(points.iter().map(key).collect())
+    }
+
+    /// Indexes points already turned to [`key`]s.
+    pub fn from_keys(keys: Vec<[f32; 3]>) -> NearestTree {
         NearestTree {
             tree: if keys.is_empty() {
                 None
             } else {
                 ImmutableKdTree::new_from_slice(&keys).ok()
             },
+            keys,
         }
+    }
+
+    /// Point `i` as the tree stores it.
+    pub fn key(&self, i: usize) -> &[f32; 3] {
+        &self.keys[i]
     }
 
     /// The nearest point to `q`: (index, squared distance in m^2); `None` for an empty
     /// tree.
     pub fn nearest(&self, q: &Vector3<f64>) -> Option<(usize, f64)> {
+        self.nearest_key(&key(q))
+    }
+
+    /// [`NearestTree::nearest`] for a query already turned to a [`key`].
+    pub fn nearest_key(&self, q: &[f32; 3]) -> Option<(usize, f64)> {
         let tree = self.tree.as_ref()?;
         let n = tree
-            .query(&key(q))
+            .query(q)
             .nearest_one::<SquaredEuclidean<f32>>()
             .execute();
         Some((n.item as usize, n.distance as f64))
+    }
+
+    /// [`NearestTree::nearest`] for a query already turned to a [`key`], together with the
+    /// squared distance of the second-nearest point (infinite when there is none), m^2.
+    pub fn nearest_two(&self, q: &[f32; 3]) -> Option<(usize, f64, f64)> {
+        let tree = self.tree.as_ref()?;
+        let two = std::num::NonZeroUsize::new(2).expect("2 is not zero");
+        let found = tree
+            .query(q)
+            .nearest_n::<SquaredEuclidean<f32>>(two)
+            .execute();
+        let first = found.first()?;
+        let second = found.get(1).map_or(f64::INFINITY, |n| n.distance as f64);
+        Some((first.item as usize, first.distance as f64, second))
     }
 
     /// The nearest point to `q` that `accept`s, within `limit` metres: (index, squared

@@ -140,6 +140,7 @@ pub fn track(
         results: out,
         seconds,
         steps: fitter.timings(),
+        nearest_reused: fitter.nearest_reused_share(),
     })
 }
 
@@ -163,6 +164,9 @@ pub struct Tracked {
     pub seconds: Vec<(u32, f64)>,
     /// Seconds spent in each step of the rounds, summed over all frames.
     pub steps: Vec<(&'static str, f64)>,
+    /// The shares of nearest-neighbour answers reused from an earlier round, model->observed
+    /// and observed->model.
+    pub nearest_reused: [f64; 2],
 }
 
 pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {

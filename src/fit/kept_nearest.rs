@@ -1,0 +1,286 @@
+//! Nearest partners kept from round to round, exactly (method.md "Stage 6", step (a)).
+//!
+//! Late in a frame's rounds the pose moves by micrometres, and almost every vertex keeps its
+//! nearest partner on the other surface. A search remembers, besides the partner, how far
+//! the second-nearest point was. By the triangle inequality the partner is still the
+//! nearest while
+//!
+//! `|q - partner| + (how far the query or the other points moved since) < second distance`
+//!
+//! so the answer is reused without a search. With a margin for the f32 coordinates the
+//! tree measures in, the reused answer is the one a fresh search would give: same point,
+//! same squared distance ([`key_distance2`] is the tree's own arithmetic).
+
+use crate::geometry::nearest::{key_distance2, NearestTree};
+use rayon::prelude::*;
+
+/// How many earlier positions of moving points are remembered: an answer found longer ago
+/// than this many searching rounds is searched afresh.
+pub const SNAPSHOTS: usize = 8;
+
+/// A query that moved less than this since its last search (or, for moving points, points
+/// that moved less than this since the last call) is searched for its second-nearest point
+/// too, metres: one that moves more would likely not pass the test next round either, and
+/// the plain nearest search is 1.7x faster (`pipeline bench nearest`).
+pub const SLOW_MOTION: f64 = 0.001;
+
+/// One kept answer.
+#[derive(Debug, Clone, Copy)]
+struct Kept<When> {
+    /// The nearest point's index.
+    item: u32,
+    /// The second-nearest point's distance when the answer was found, metres (infinite for
+    /// a tree of one point; 0 when it was not searched, so that the answer never passes).
+    second: f64,
+    /// When the answer was found: where the query stood, or which snapshot of the points.
+    when: When,
+}
+
+/// A margin covering the f32 rounding of distances measured at `q`, metres: a few units in
+/// the last place of the coordinates (about 1e-7 m at 1 m) and a fixed 10 micrometres.
+fn margin(q: &[f32; 3]) -> f64 {
+    let size = q.iter().fold(0.0f64, |m, &c| m.max((c as f64).abs()));
+    1e-5 + 4e-6 * size
+}
+
+/// Euclidean distance between two keys, in f64, metres.
+fn key_distance(a: &[f32; 3], b: &[f32; 3]) -> f64 {
+    (0..3)
+        .map(|i| (a[i] as f64 - b[i] as f64).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// A fresh search; with `two` it remembers the second-nearest distance.
+fn search<When>(
+    tree: &NearestTree,
+    q: &[f32; 3],
+    two: bool,
+    when: When,
+) -> (Option<Kept<When>>, (usize, f64)) {
+    let found = if two {
+        tree.nearest_two(q)
+    } else {
+        tree.nearest_key(q).map(|(item, d2)| (item, d2, 0.0))
+    };
+    match found {
+        Some((item, d2, second2)) => (
+            Some(Kept {
+                item: item as u32,
+                second: second2.sqrt(),
+                when,
+            }),
+            (item, d2),
+        ),
+        None => (None, (0, f64::INFINITY)),
+    }
+}
+
+/// Nearest answers for queries that move against a tree that does not (each model vertex's
+/// nearest observed vertex).
+#[derive(Debug, Default)]
+pub struct MovingQueries {
+    kept: Vec<Option<Kept<[f32; 3]>>>,
+    /// Answers reused, over every call (for benchmarks).
+    pub reused: usize,
+}
+
+impl MovingQueries {
+    /// Each query's nearest point in `tree`: (index, squared distance in m^2 as the tree
+    /// measures it), (0, inf) for an empty tree. `tree` must be the same in every call.
+    pub fn partners(&mut self, queries: &[[f32; 3]], tree: &NearestTree) -> Vec<(usize, f64)> {
+        if self.kept.len() != queries.len() {
+            self.kept = vec![None; queries.len()];
+        }
+        let answers: Vec<(usize, f64, bool)> = self
+            .kept
+            .par_iter_mut()
+            .zip(queries)
+            .map(|(kept, q)| {
+                let mut slow = false;
+                if let Some(k) = kept {
+                    let d2 = key_distance2(q, tree.key(k.item as usize));
+                    let moved = key_distance(q, &k.when);
+                    if d2.sqrt() + moved + margin(q) < k.second {
+                        return (k.item as usize, d2, true);
+                    }
+                    slow = moved < SLOW_MOTION;
+                }
+                let (fresh, (item, d2)) = search(tree, q, slow, *q);
+                *kept = fresh;
+                (item, d2, false)
+            })
+            .collect();
+        self.reused += answers.iter().filter(|a| a.2).count();
+        answers.into_iter().map(|(i, d2, _)| (i, d2)).collect()
+    }
+}
+
+/// Nearest answers for queries that stay against points that move (each observed vertex's
+/// nearest model vertex). The points' positions at the last [`SNAPSHOTS`] searching calls
+/// are kept; every other point has come nearer to a query since its answer was found by at
+/// most the largest motion of any point since that snapshot.
+#[derive(Debug, Default)]
+pub struct MovingPoints {
+    kept: Vec<Option<Kept<u64>>>,
+    /// (number, the points then), oldest first.
+    snapshots: std::collections::VecDeque<(u64, Vec<[f32; 3]>)>,
+    /// The next snapshot's number.
+    next: u64,
+    /// The points' largest motion since the newest snapshot, metres, at the last call.
+    step: f64,
+    /// Answers reused, over every call (for benchmarks).
+    pub reused: usize,
+}
+
+impl MovingPoints {
+    /// The answers that still hold for `queries` (the same in every call) against `points`
+    /// now; `None` where a search is needed ([`MovingPoints::search`]).
+    pub fn kept(&mut self, queries: &[[f32; 3]], points: &[[f32; 3]]) -> Vec<Option<(usize, f64)>> {
+        if self.kept.len() != queries.len()
+            || self
+                .snapshots
+                .back()
+                .is_some_and(|s| s.1.len() != points.len())
+        {
+            self.kept = vec![None; queries.len()];
+            self.snapshots.clear();
+        }
+        // Each snapshot's largest motion of any point since.
+        let moved: Vec<(u64, f64)> = self
+            .snapshots
+            .iter()
+            .map(|(number, then)| {
+                let most = then
+                    .par_iter()
+                    .zip(points)
+                    .map(|(a, b)| key_distance(a, b))
+                    .reduce(|| 0.0, f64::max);
+                (*number, most)
+            })
+            .collect();
+        self.step = moved.last().map_or(f64::INFINITY, |m| m.1);
+        let answers: Vec<Option<(usize, f64)>> = self
+            .kept
+            .par_iter()
+            .zip(queries)
+            .map(|(kept, q)| {
+                let k = kept.as_ref()?;
+                let since = moved.iter().find(|m| m.0 == k.when)?.1;
+                let d2 = key_distance2(q, &points[k.item as usize]);
+                (d2.sqrt() + since + margin(q) < k.second).then_some((k.item as usize, d2))
+            })
+            .collect();
+        self.reused += answers.iter().filter(|a| a.is_some()).count();
+        answers
+    }
+
+    /// Fills the answers [`MovingPoints::kept`] left out by searching `tree`, built over
+    /// `points` (as given to that call), and keeps them.
+    pub fn search(
+        &mut self,
+        queries: &[[f32; 3]],
+        points: &[[f32; 3]],
+        tree: &NearestTree,
+        answers: Vec<Option<(usize, f64)>>,
+    ) -> Vec<(usize, f64)> {
+        let (number, slow) = (self.next, self.step < SLOW_MOTION);
+        self.next += 1;
+        self.snapshots.push_back((number, points.to_vec()));
+        if self.snapshots.len() > SNAPSHOTS {
+            self.snapshots.pop_front();
+        }
+        self.kept
+            .par_iter_mut()
+            .zip(queries)
+            .zip(answers)
+            .map(|((kept, q), answer)| {
+                answer.unwrap_or_else(|| {
+                    let (fresh, found) = search(tree, q, slow, number);
+                    *kept = fresh;
+                    found
+                })
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::nearest::key;
+    use nalgebra::Vector3;
+
+    /// A random walk on a 1 cm lattice (ties, as marching-cubes vertices give) plus small
+    /// steps: each round's kept answers equal a fresh search's, point for point, and most
+    /// are reused.
+    fn lattice(seed: u64, count: usize) -> (Vec<[f32; 3]>, impl FnMut() -> f64) {
+        let mut s = seed;
+        let mut rnd = move || {
+            s = crate::synth::rng::mix64(s);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let points = (0..count)
+            .map(|_| {
+                let mut c = || (rnd() * 20.0).floor() * 0.01 + 1.0;
+                key(&Vector3::new(c(), c(), c()))
+            })
+            .collect();
+        (points, rnd)
+    }
+
+    fn walk(points: &mut [[f32; 3]], rnd: &mut impl FnMut() -> f64, step: f64) {
+        for p in points.iter_mut() {
+            for c in p.iter_mut() {
+                *c += ((rnd() - 0.5) * 2.0 * step) as f32;
+            }
+        }
+    }
+
+    #[test]
+    fn moving_queries_agree_with_fresh_searches() {
+        let (fixed, _) = lattice(3, 2000);
+        let tree = NearestTree::from_keys(fixed.clone());
+        let (mut queries, mut rnd) = lattice(5, 1500);
+        walk(&mut queries, &mut rnd, 0.002);
+        let mut kept = MovingQueries::default();
+        for round in 0..30 {
+            let got = kept.partners(&queries, &tree);
+            for (q, g) in queries.iter().zip(&got) {
+                assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
+            }
+            // Mostly slow steps, now and then a jump.
+            walk(
+                &mut queries,
+                &mut rnd,
+                if round % 7 == 6 { 0.004 } else { 0.0003 },
+            );
+        }
+        assert!(kept.reused > 30 * 1500 / 2, "reused {}", kept.reused);
+    }
+
+    #[test]
+    fn moving_points_agree_with_fresh_searches() {
+        let (queries, _) = lattice(7, 1500);
+        let (mut points, mut rnd) = lattice(11, 2000);
+        walk(&mut points, &mut rnd, 0.002);
+        let mut kept = MovingPoints::default();
+        let mut searched = 0;
+        for round in 0..30 {
+            let tree = NearestTree::from_keys(points.clone());
+            let answers = kept.kept(&queries, &points);
+            searched += answers.iter().filter(|a| a.is_none()).count();
+            let got = kept.search(&queries, &points, &tree, answers);
+            for (q, g) in queries.iter().zip(&got) {
+                assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
+            }
+            walk(
+                &mut points,
+                &mut rnd,
+                if round % 7 == 6 { 0.004 } else { 0.0002 },
+            );
+        }
+        assert_eq!(kept.reused + searched, 30 * 1500);
+        assert!(kept.reused > 30 * 1500 / 3, "reused {}", kept.reused);
+    }
+}
