@@ -14,15 +14,12 @@
 use crate::geometry::nearest::{key_distance2, NearestTree};
 use rayon::prelude::*;
 
-/// How many earlier positions of moving points are remembered: an answer found longer ago
-/// than this many searching rounds is searched afresh.
-pub const SNAPSHOTS: usize = 8;
-
-/// A query that moved less than this since its last search (or, for moving points, points
-/// that moved less than this since the last call) is searched for its second-nearest point
-/// too, metres: one that moves more would likely not pass the test next round either, and
-/// the plain nearest search is 1.7x faster (`pipeline bench nearest`).
-pub const SLOW_MOTION: f64 = 0.001;
+/// How far beyond the previous partner's distance a search looks for the second-nearest
+/// point, metres. The previous partner bounds the search, which makes it about as fast as a
+/// plain nearest search (without a bound, looking for two is 1.7x slower: `pipeline bench
+/// nearest`); an answer whose second point lies beyond is kept with this bound as its
+/// second distance, good for motions up to about half of it.
+pub const SECOND_REACH: f64 = 0.002;
 
 /// One kept answer.
 #[derive(Debug, Clone, Copy)]
@@ -32,7 +29,8 @@ struct Kept<When> {
     /// The second-nearest point's distance when the answer was found, metres (infinite for
     /// a tree of one point; 0 when it was not searched, so that the answer never passes).
     second: f64,
-    /// When the answer was found: where the query stood, or which snapshot of the points.
+    /// When the answer was found: where the query stood, or the moving points' running sum
+    /// of motion.
     when: When,
 }
 
@@ -43,23 +41,29 @@ fn margin(q: &[f32; 3]) -> f64 {
     1e-5 + 4e-6 * size
 }
 
-/// Euclidean distance between two keys, in f64, metres.
-fn key_distance(a: &[f32; 3], b: &[f32; 3]) -> f64 {
-    (0..3)
-        .map(|i| (a[i] as f64 - b[i] as f64).powi(2))
-        .sum::<f64>()
-        .sqrt()
+/// Squared Euclidean distance between two keys, in f64, m^2.
+fn key_distance2_f64(a: &[f32; 3], b: &[f32; 3]) -> f64 {
+    (0..3).map(|i| (a[i] as f64 - b[i] as f64).powi(2)).sum()
 }
 
-/// A fresh search; with `two` it remembers the second-nearest distance.
+/// Euclidean distance between two keys, in f64, metres.
+fn key_distance(a: &[f32; 3], b: &[f32; 3]) -> f64 {
+    key_distance2_f64(a, b).sqrt()
+}
+
+/// A fresh search. `bound` is the current distance of the point that was nearest before,
+/// metres, so the nearest is within it; the search then also finds the second-nearest up
+/// to [`SECOND_REACH`] farther. Without one (infinite: the first search) the second is not
+/// looked for, as the first rounds move too far for an answer to be kept.
 fn search<When>(
     tree: &NearestTree,
     q: &[f32; 3],
-    two: bool,
+    bound: f64,
     when: When,
 ) -> (Option<Kept<When>>, (usize, f64)) {
-    let found = if two {
-        tree.nearest_two(q)
+    let found = if bound.is_finite() {
+        tree.nearest_two_within(q, bound + SECOND_REACH)
+            .or_else(|| tree.nearest_two(q))
     } else {
         tree.nearest_key(q).map(|(item, d2)| (item, d2, 0.0))
     };
@@ -97,16 +101,16 @@ impl MovingQueries {
             .par_iter_mut()
             .zip(queries)
             .map(|(kept, q)| {
-                let mut slow = false;
+                let mut bound = f64::INFINITY;
                 if let Some(k) = kept {
                     let d2 = key_distance2(q, tree.key(k.item as usize));
                     let moved = key_distance(q, &k.when);
                     if d2.sqrt() + moved + margin(q) < k.second {
                         return (k.item as usize, d2, true);
                     }
-                    slow = moved < SLOW_MOTION;
+                    bound = d2.sqrt();
                 }
-                let (fresh, (item, d2)) = search(tree, q, slow, *q);
+                let (fresh, (item, d2)) = search(tree, q, bound, *q);
                 *kept = fresh;
                 (item, d2, false)
             })
@@ -117,86 +121,79 @@ impl MovingQueries {
 }
 
 /// Nearest answers for queries that stay against points that move (each observed vertex's
-/// nearest model vertex). The points' positions at the last [`SNAPSHOTS`] searching calls
-/// are kept; every other point has come nearer to a query since its answer was found by at
-/// most the largest motion of any point since that snapshot.
+/// nearest model vertex). Every call adds the points' largest motion since the call before
+/// to a running sum: since an answer was found, no point has moved farther than the sum's
+/// growth since then (triangle inequality), so no other point has come nearer to a query
+/// by more than that.
 #[derive(Debug, Default)]
 pub struct MovingPoints {
-    kept: Vec<Option<Kept<u64>>>,
-    /// (number, the points then), oldest first.
-    snapshots: std::collections::VecDeque<(u64, Vec<[f32; 3]>)>,
-    /// The next snapshot's number.
-    next: u64,
-    /// The points' largest motion since the newest snapshot, metres, at the last call.
-    step: f64,
+    /// Each answer, with the running sum when it was found, metres.
+    kept: Vec<Option<Kept<f64>>>,
+    /// The points at the last call.
+    last: Vec<[f32; 3]>,
+    /// The running sum of the points' largest motion per call, metres.
+    path: f64,
     /// Answers reused, over every call (for benchmarks).
     pub reused: usize,
 }
 
 impl MovingPoints {
     /// The answers that still hold for `queries` (the same in every call) against `points`
-    /// now; `None` where a search is needed ([`MovingPoints::search`]).
-    pub fn kept(&mut self, queries: &[[f32; 3]], points: &[[f32; 3]]) -> Vec<Option<(usize, f64)>> {
-        if self.kept.len() != queries.len()
-            || self
-                .snapshots
-                .back()
-                .is_some_and(|s| s.1.len() != points.len())
-        {
+    /// now; where a search is needed ([`MovingPoints::search`]), the distance of the point
+    /// that was nearest before (infinite for none), metres.
+    pub fn kept(
+        &mut self,
+        queries: &[[f32; 3]],
+        points: &[[f32; 3]],
+    ) -> Vec<Result<(usize, f64), f64>> {
+        if self.kept.len() != queries.len() || self.last.len() != points.len() {
             self.kept = vec![None; queries.len()];
-            self.snapshots.clear();
+        } else {
+            let most2 = self
+                .last
+                .par_iter()
+                .zip(points)
+                .map(|(a, b)| key_distance2_f64(a, b))
+                .reduce(|| 0.0, f64::max);
+            self.path += most2.sqrt();
         }
-        // Each snapshot's largest motion of any point since.
-        let moved: Vec<(u64, f64)> = self
-            .snapshots
-            .iter()
-            .map(|(number, then)| {
-                let most = then
-                    .par_iter()
-                    .zip(points)
-                    .map(|(a, b)| key_distance(a, b))
-                    .reduce(|| 0.0, f64::max);
-                (*number, most)
-            })
-            .collect();
-        self.step = moved.last().map_or(f64::INFINITY, |m| m.1);
-        let answers: Vec<Option<(usize, f64)>> = self
+        self.last.clear();
+        self.last.extend_from_slice(points);
+        let path = self.path;
+        let answers: Vec<Result<(usize, f64), f64>> = self
             .kept
             .par_iter()
             .zip(queries)
             .map(|(kept, q)| {
-                let k = kept.as_ref()?;
-                let since = moved.iter().find(|m| m.0 == k.when)?.1;
+                let k = kept.as_ref().ok_or(f64::INFINITY)?;
                 let d2 = key_distance2(q, &points[k.item as usize]);
-                (d2.sqrt() + since + margin(q) < k.second).then_some((k.item as usize, d2))
+                if d2.sqrt() + (path - k.when) + margin(q) < k.second {
+                    Ok((k.item as usize, d2))
+                } else {
+                    Err(d2.sqrt())
+                }
             })
             .collect();
-        self.reused += answers.iter().filter(|a| a.is_some()).count();
+        self.reused += answers.iter().filter(|a| a.is_ok()).count();
         answers
     }
 
-    /// Fills the answers [`MovingPoints::kept`] left out by searching `tree`, built over
-    /// `points` (as given to that call), and keeps them.
+    /// Fills the answers [`MovingPoints::kept`] left out by searching `tree`, built over the
+    /// points given to that call, and keeps them.
     pub fn search(
         &mut self,
         queries: &[[f32; 3]],
-        points: &[[f32; 3]],
         tree: &NearestTree,
-        answers: Vec<Option<(usize, f64)>>,
+        answers: Vec<Result<(usize, f64), f64>>,
     ) -> Vec<(usize, f64)> {
-        let (number, slow) = (self.next, self.step < SLOW_MOTION);
-        self.next += 1;
-        self.snapshots.push_back((number, points.to_vec()));
-        if self.snapshots.len() > SNAPSHOTS {
-            self.snapshots.pop_front();
-        }
+        let path = self.path;
         self.kept
             .par_iter_mut()
             .zip(queries)
             .zip(answers)
             .map(|((kept, q), answer)| {
-                answer.unwrap_or_else(|| {
-                    let (fresh, found) = search(tree, q, slow, number);
+                answer.unwrap_or_else(|bound| {
+                    let (fresh, found) = search(tree, q, bound, path);
                     *kept = fresh;
                     found
                 })
@@ -269,8 +266,8 @@ mod tests {
         for round in 0..30 {
             let tree = NearestTree::from_keys(points.clone());
             let answers = kept.kept(&queries, &points);
-            searched += answers.iter().filter(|a| a.is_none()).count();
-            let got = kept.search(&queries, &points, &tree, answers);
+            searched += answers.iter().filter(|a| a.is_err()).count();
+            let got = kept.search(&queries, &tree, answers);
             for (q, g) in queries.iter().zip(&got) {
                 assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
             }

@@ -860,12 +860,12 @@ impl<'a> Fitter<'a> {
             let answers = self.time("nearest observed->model", || {
                 to_model.kept(&prepared.keys, &keys)
             });
-            let backward = if answers.iter().all(|a| a.is_some()) {
+            let backward = if answers.iter().all(|a| a.is_ok()) {
                 answers.into_iter().flatten().collect()
             } else {
-                let model_tree = self.time("model tree", || NearestTree::from_keys(keys.clone()));
+                let model_tree = self.time("model tree", || NearestTree::from_keys(keys));
                 self.time("nearest observed->model", || {
-                    to_model.search(&prepared.keys, &keys, &model_tree, answers)
+                    to_model.search(&prepared.keys, &model_tree, answers)
                 })
             };
             if let Ok(mut r) = self.nearest_reuse.lock() {

@@ -88,6 +88,23 @@ impl NearestTree {
         Some((first.item as usize, first.distance as f64, second))
     }
 
+    /// [`NearestTree::nearest_two`] searching only within `radius` metres of `q`: the
+    /// second distance is `radius` squared when no second point lies that near (every
+    /// other point is then farther), `None` when none does.
+    pub fn nearest_two_within(&self, q: &[f32; 3], radius: f64) -> Option<(usize, f64, f64)> {
+        let tree = self.tree.as_ref()?;
+        let two = std::num::NonZeroUsize::new(2).expect("2 is not zero");
+        let r2 = (radius * radius) as f32;
+        let found = tree
+            .query(q)
+            .nearest_n::<SquaredEuclidean<f32>>(two)
+            .within(r2)
+            .execute();
+        let first = found.first()?;
+        let second = found.get(1).map_or(r2 as f64, |n| n.distance as f64);
+        Some((first.item as usize, first.distance as f64, second))
+    }
+
     /// The nearest point to `q` that `accept`s, within `limit` metres: (index, squared
     /// distance in m^2; ties to the lower index). Searches balls that double from twice the
     /// nearest point's distance, so points far beyond the answer are not visited.
