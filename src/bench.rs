@@ -475,6 +475,12 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
     let _ = writeln!(out, "    {:<26} {:8.2} ms", "total", sum * 1e3 / rounds);
     let _ = writeln!(
         out,
+        "    {:<26} {:8.2} ms",
+        "wall clock (fit / rounds)",
+        total * 1e3 / rounds
+    );
+    let _ = writeln!(
+        out,
         "  nearest answers reused from an earlier round: {:.1}% model->observed, {:.1}% observed->model",
         100.0 * fitter.nearest_reused_share()[0],
         100.0 * fitter.nearest_reused_share()[1]

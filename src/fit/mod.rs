@@ -728,8 +728,8 @@ impl<'a> Fitter<'a> {
         let mut accel = anderson::Anderson::new(p.acceleration);
         let mut stall = StallWatch::new(p.stall_rounds, joints_of(self.model, &pose));
         while diagnostics.iterations < p.max_iterations {
-            let problem = self.held(&round);
             let (stepped, report) = self.time("lm steps", || {
+                let problem = self.held(&round);
                 solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut lambda)
             });
             diagnostics.iterations += 1;

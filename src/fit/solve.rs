@@ -56,8 +56,9 @@ impl<'a> HeldProblem<'a> {
                 _ => blended.push(i as u32),
             }
         }
+        // Bone by bone in parallel; each bone's sums run in order (the same bits).
         let rigid = per_bone
-            .iter()
+            .par_iter()
             .enumerate()
             .filter_map(|(b, mine)| {
                 let pulls = mine.iter().map(|&i| {
