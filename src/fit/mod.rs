@@ -876,52 +876,54 @@ impl<'a> Fitter<'a> {
             }
             (forward, backward)
         };
-        let n = posed.len();
-        let mut w_sum = vec![0.0; n];
-        let mut target = vec![Vector3::zeros(); n];
-        let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
-        let mut add = |v: usize, u: usize, d2: f64| {
-            let w = if d2.is_finite() { weight(v, u) } else { 0.0 };
-            if w < 0.5 {
-                downweighted += 1;
+        self.time("pairs, weights", || {
+            let n = posed.len();
+            let mut w_sum = vec![0.0; n];
+            let mut target = vec![Vector3::zeros(); n];
+            let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
+            let mut add = |v: usize, u: usize, d2: f64| {
+                let w = if d2.is_finite() { weight(v, u) } else { 0.0 };
+                if w < 0.5 {
+                    downweighted += 1;
+                }
+                if w > 0.0 && d2.is_finite() {
+                    w_sum[v] += w;
+                    target[v] += w * obs.vertices[u];
+                    weighted_sq += w * d2;
+                    weight_sum += w;
+                }
+            };
+            for (v, &(u, d2)) in forward.iter().enumerate() {
+                add(v, u, d2);
             }
-            if w > 0.0 && d2.is_finite() {
-                w_sum[v] += w;
-                target[v] += w * obs.vertices[u];
-                weighted_sq += w * d2;
-                weight_sum += w;
+            for (u, &(v, d2)) in backward.iter().enumerate() {
+                add(v, u, d2);
             }
-        };
-        for (v, &(u, d2)) in forward.iter().enumerate() {
-            add(v, u, d2);
-        }
-        for (u, &(v, d2)) in backward.iter().enumerate() {
-            add(v, u, d2);
-        }
-        let pulled: Vec<usize> = (0..n).filter(|&v| w_sum[v] > 0.0).collect();
-        let pulls = pulled
-            .iter()
-            .map(|&v| (v as u32, w_sum[v], target[v] / w_sum[v]))
-            .collect();
-        let pull_normals = pulled.iter().map(|&v| normals[v]).collect();
-        let r_c: f64 = rho_c.iter().sum();
-        let r_p: f64 = if method.uses_rho_p() {
-            obs.rho_p.iter().sum()
-        } else {
-            obs.vertices.len() as f64
-        };
-        Round {
-            targets: Targets {
-                pulls,
-                normals: pull_normals,
-            },
-            weighted_sq,
-            weight_sum,
-            pairs: forward.len() + backward.len(),
-            downweighted,
-            normalizer: (r_c * r_p).max(1e-300),
-            contact_share: rho_c.iter().filter(|&&r| r < 0.5).count() as f64 / n.max(1) as f64,
-        }
+            let pulled: Vec<usize> = (0..n).filter(|&v| w_sum[v] > 0.0).collect();
+            let pulls = pulled
+                .iter()
+                .map(|&v| (v as u32, w_sum[v], target[v] / w_sum[v]))
+                .collect();
+            let pull_normals = pulled.iter().map(|&v| normals[v]).collect();
+            let r_c: f64 = rho_c.iter().sum();
+            let r_p: f64 = if method.uses_rho_p() {
+                obs.rho_p.iter().sum()
+            } else {
+                obs.vertices.len() as f64
+            };
+            Round {
+                targets: Targets {
+                    pulls,
+                    normals: pull_normals,
+                },
+                weighted_sq,
+                weight_sum,
+                pairs: forward.len() + backward.len(),
+                downweighted,
+                normalizer: (r_c * r_p).max(1e-300),
+                contact_share: rho_c.iter().filter(|&&r| r < 0.5).count() as f64 / n.max(1) as f64,
+            }
+        })
     }
 }
 
