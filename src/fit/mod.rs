@@ -795,31 +795,18 @@ impl<'a> Fitter<'a> {
                 .collect();
             (posed, normals)
         });
-        let rho_c = if method.uses_rho_c() {
-            self.time("rho_c", || self.contact.weights(&posed, &normals))
-        } else {
-            vec![1.0; posed.len()]
+        let find_rho_c = || {
+            if method.uses_rho_c() {
+                self.time("rho_c", || self.contact.weights(&posed, &normals))
+            } else {
+                vec![1.0; posed.len()]
+            }
         };
         let cos_limit = p.normal_angle_deg.to_radians().cos();
         // `normals` with `nearest_compatible`: the nearest vertex whose normal agrees.
         let compatible =
             method == Method::Normals && p.normal_pairs == NormalPairs::NearestCompatible;
         let agree = |v: usize, u: usize| normals[v].dot(&obs.normals[u]) >= cos_limit;
-        let weight = |v: usize, u: usize| -> f64 {
-            match method {
-                Method::Icp => 1.0,
-                Method::Normals => {
-                    if agree(v, u) {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                }
-                Method::RhoC => rho_c[v],
-                Method::RhoP => obs.rho_p[u],
-                Method::Proposed => rho_c[v] * obs.rho_p[u],
-            }
-        };
         // With `compatible`, each query point's nearest partner in `tree` whose normal agrees
         // (`agrees(query, partner)`); (0, inf) for none.
         let partners = |queries: &[Vector3<f64>],
@@ -835,46 +822,73 @@ impl<'a> Fitter<'a> {
                 })
                 .collect()
         };
-        let (forward, backward) = if compatible {
-            // Model -> observed: each model vertex's nearest observed vertex whose normal
-            // agrees.
-            let forward = self.time("nearest model->observed", || {
-                partners(&posed, obs_tree, &|v, u| agree(v, u))
-            });
-            // Observed -> model.
-            let model_tree = self.time("model tree", || NearestTree::new(&posed));
-            let backward = self.time("nearest observed->model", || {
-                partners(&obs.vertices, &model_tree, &|u, v| agree(v, u))
-            });
-            (forward, backward)
-        } else {
-            // The nearest partners both ways, reusing the earlier rounds' answers that still
-            // hold ([`kept_nearest`]; the same answers as fresh searches).
-            let keys: Vec<[f32; 3]> = posed.iter().map(key).collect();
-            let mut guard = prepared.kept.lock().unwrap_or_else(|e| e.into_inner());
-            let (to_observed, to_model) = &mut *guard;
-            let reused_before = [to_observed.reused, to_model.reused];
-            let forward = self.time("nearest model->observed", || {
-                to_observed.partners(&keys, obs_tree)
-            });
-            let answers = self.time("nearest observed->model", || {
-                to_model.kept(&prepared.keys, &keys)
-            });
-            let backward = if answers.iter().all(|a| a.is_ok()) {
-                answers.into_iter().flatten().collect()
+        let find_pairs = || {
+            if compatible {
+                // Model -> observed: each model vertex's nearest observed vertex whose normal
+                // agrees.
+                let forward = self.time("nearest model->observed", || {
+                    partners(&posed, obs_tree, &|v, u| agree(v, u))
+                });
+                // Observed -> model.
+                let model_tree = self.time("model tree", || NearestTree::new(&posed));
+                let backward = self.time("nearest observed->model", || {
+                    partners(&obs.vertices, &model_tree, &|u, v| agree(v, u))
+                });
+                (forward, backward)
             } else {
-                let model_tree = self.time("model tree", || NearestTree::from_keys(keys));
-                self.time("nearest observed->model", || {
-                    to_model.search(&prepared.keys, &model_tree, answers)
-                })
-            };
-            if let Ok(mut r) = self.nearest_reuse.lock() {
-                r[0] += to_observed.reused - reused_before[0];
-                r[1] += forward.len();
-                r[2] += to_model.reused - reused_before[1];
-                r[3] += backward.len();
+                // The nearest partners both ways, reusing the earlier rounds' answers that still
+                // hold ([`kept_nearest`]; the same answers as fresh searches).
+                let keys: Vec<[f32; 3]> = posed.iter().map(key).collect();
+                let mut guard = prepared.kept.lock().unwrap_or_else(|e| e.into_inner());
+                let (to_observed, to_model) = &mut *guard;
+                let reused_before = [to_observed.reused, to_model.reused];
+                let (forward, backward) = rayon::join(
+                    || {
+                        self.time("nearest model->observed", || {
+                            to_observed.partners(&keys, obs_tree)
+                        })
+                    },
+                    || {
+                        let answers = self.time("nearest observed->model", || {
+                            to_model.kept(&prepared.keys, &keys)
+                        });
+                        if answers.iter().all(|a| a.is_ok()) {
+                            answers.into_iter().flatten().collect()
+                        } else {
+                            let model_tree =
+                                self.time("model tree", || NearestTree::from_keys(keys.clone()));
+                            self.time("nearest observed->model", || {
+                                to_model.search(&prepared.keys, &model_tree, answers)
+                            })
+                        }
+                    },
+                );
+                if let Ok(mut r) = self.nearest_reuse.lock() {
+                    r[0] += to_observed.reused - reused_before[0];
+                    r[1] += forward.len();
+                    r[2] += to_model.reused - reused_before[1];
+                    r[3] += backward.len();
+                }
+                (forward, backward)
             }
-            (forward, backward)
+        };
+        // rho_c and the pairs depend only on the posed model: found side by side, so that
+        // one's sequential parts (tree builds) overlap the other's parallel searches.
+        let (rho_c, (forward, backward)) = rayon::join(find_rho_c, find_pairs);
+        let weight = |v: usize, u: usize| -> f64 {
+            match method {
+                Method::Icp => 1.0,
+                Method::Normals => {
+                    if agree(v, u) {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                }
+                Method::RhoC => rho_c[v],
+                Method::RhoP => obs.rho_p[u],
+                Method::Proposed => rho_c[v] * obs.rho_p[u],
+            }
         };
         self.time("pairs, weights", || {
             let n = posed.len();
