@@ -99,11 +99,7 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     let tracked = job.tracked_frames().unwrap();
     let model = hullpose::stages::model::load(&ctx).unwrap();
     // Tracked from t0 up to frame `last` (rho_p is only needed up to the contact frames).
-    let baseline = |method, last: u32| {
-        let params = hullpose::fit::FitParams {
-            method,
-            ..Default::default()
-        };
+    let baseline = |params: hullpose::fit::FitParams, last: u32| {
         let frames: Vec<u32> = tracked.iter().copied().filter(|&f| f <= last).collect();
         let fits = hullpose::stages::fit::track(&ctx, &frames, &params, &|_| {})
             .unwrap()
@@ -117,14 +113,24 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     // The fit stage (method `proposed`, every frame) and the four baselines side by side:
     // each round's serial parts (LM steps, trees) of one overlap with the others' parallel
     // searches.
-    use hullpose::fit::Method;
+    // Also `proposed` with the faster `direct` solver, over every frame.
+    use hullpose::fit::{FitParams, Method, Solver};
+    let method = |method| FitParams {
+        method,
+        ..Default::default()
+    };
+    let direct = FitParams {
+        solver: Solver::Direct,
+        ..Default::default()
+    };
     let runs = [
-        (Method::Icp, 11),
-        (Method::Normals, 11),
-        (Method::RhoC, 8),
-        (Method::RhoP, 10),
+        (method(Method::Icp), 11),
+        (method(Method::Normals), 11),
+        (method(Method::RhoC), 8),
+        (method(Method::RhoP), 10),
+        (direct, 18),
     ];
-    let (fit_run, [icp, normals, rho_c, rho_p]) = std::thread::scope(|s| {
+    let (fit_run, [icp, normals, rho_c, rho_p, direct]) = std::thread::scope(|s| {
         let fit_run = s.spawn(|| {
             let (ok, out, err) = run_cli(&["run", "pipeline.yaml", "--only", "fit"], d);
             assert!(ok, "{err}");
@@ -133,7 +139,7 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
             format!("{out}\n{eval}")
         });
         let baseline = &baseline;
-        let handles = runs.map(|(method, last)| s.spawn(move || baseline(method, last)));
+        let handles = runs.map(|(params, last)| s.spawn(move || baseline(params, last)));
         (fit_run.join().unwrap(), handles.map(|h| h.join().unwrap()))
     });
     eprintln!("{fit_run}");
@@ -163,6 +169,7 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     let proposed = errors_cm(d, &rows);
     eprintln!("proposed: {proposed:.2?}");
     eprintln!("icp: {icp:.2?}\nnormals: {normals:.2?}\nrho_c: {rho_c:.2?}\nrho_p: {rho_p:.2?}");
+    eprintln!("proposed, solver direct: {direct:.2?}");
     // The paper's Fig. 8: ICP and Ogawara's normal test slip both where the phantom volume
     // forms (t6-t8, t11-t13) and where the lower arms press together (t9-t10); rho_c alone
     // on the phantom frames, rho_p alone on the contact frames.
@@ -172,6 +179,11 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     // Within 1 cm on every frame (the paper's result; the README's table).
     let proposed_worst = worst(&proposed, &all);
     assert!(proposed_worst <= 1.0, "proposed worst {proposed_worst}");
+    let direct_worst = worst(&direct, &all);
+    assert!(
+        direct_worst <= 1.0,
+        "proposed with solver direct: worst {direct_worst}"
+    );
     assert!(
         worst(&icp, &phantom) > 3.0,
         "icp on phantom frames {icp:.2?}"
