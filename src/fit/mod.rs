@@ -825,12 +825,16 @@ impl<'a> Fitter<'a> {
         let find_pairs = || {
             if compatible {
                 // Model -> observed: each model vertex's nearest observed vertex whose normal
-                // agrees.
-                let forward = self.time("nearest model->observed", || {
-                    partners(&posed, obs_tree, &|v, u| agree(v, u))
-                });
+                // agrees; the model's tree for the way back is built meanwhile.
+                let (forward, model_tree) = rayon::join(
+                    || {
+                        self.time("nearest model->observed", || {
+                            partners(&posed, obs_tree, &|v, u| agree(v, u))
+                        })
+                    },
+                    || self.time("model tree", || NearestTree::new(&posed)),
+                );
                 // Observed -> model.
-                let model_tree = self.time("model tree", || NearestTree::new(&posed));
                 let backward = self.time("nearest observed->model", || {
                     partners(&obs.vertices, &model_tree, &|u, v| agree(v, u))
                 });
