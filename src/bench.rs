@@ -416,12 +416,12 @@ pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) 
         }
     }
     let _ = writeln!(out, "  per round ({rounds} rounds):");
-    write_round_steps(&mut out, &tracked.steps, rounds.max(1) as f64, seconds);
-    let _ = writeln!(
-        out,
-        "  nearest answers reused from an earlier round: {:.1}% model->observed, {:.1}% observed->model",
-        100.0 * tracked.nearest_reused[0],
-        100.0 * tracked.nearest_reused[1]
+    write_round_steps(
+        &mut out,
+        &tracked.steps,
+        rounds.max(1) as f64,
+        seconds,
+        tracked.nearest_reused,
     );
     let _ = writeln!(
         out,
@@ -461,20 +461,27 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
         result.diagnostics.iterations,
         result.diagnostics.status
     );
-    write_round_steps(&mut out, &fitter.timings(), rounds, total);
-    let _ = writeln!(
-        out,
-        "  nearest answers reused from an earlier round: {:.1}% model->observed, {:.1}% observed->model",
-        100.0 * fitter.nearest_reused_share()[0],
-        100.0 * fitter.nearest_reused_share()[1]
+    write_round_steps(
+        &mut out,
+        &fitter.timings(),
+        rounds,
+        total,
+        fitter.nearest_reused_share(),
     );
     Ok(out)
 }
 
 /// Writes a fit's milliseconds per round of each step, their sum and the wall clock
-/// (`wall` seconds over `rounds`). rho_c and the nearest searches run side by side, so the
-/// sum exceeds the wall clock by their overlap.
-fn write_round_steps(out: &mut String, steps: &[(&'static str, f64)], rounds: f64, wall: f64) {
+/// (`wall` seconds over `rounds`), then the shares of nearest answers `reused` (model->observed,
+/// observed->model). rho_c and the nearest searches run side by side, so the sum exceeds the
+/// wall clock by their overlap.
+fn write_round_steps(
+    out: &mut String,
+    steps: &[(&'static str, f64)],
+    rounds: f64,
+    wall: f64,
+    reused: [f64; 2],
+) {
     let mut sum = 0.0;
     for (step, secs) in steps {
         sum += secs;
@@ -491,5 +498,11 @@ fn write_round_steps(out: &mut String, steps: &[(&'static str, f64)], rounds: f6
         "    {:<26} {:8.2} ms   (rho_c and the nearest searches overlap)",
         "wall clock",
         wall * 1e3 / rounds
+    );
+    let _ = writeln!(
+        out,
+        "  nearest answers reused from an earlier round: {:.1}% model->observed, {:.1}% observed->model",
+        100.0 * reused[0],
+        100.0 * reused[1]
     );
 }

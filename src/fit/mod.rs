@@ -396,8 +396,6 @@ struct Prepared {
     /// Finite observed vertices thinned to `sample_spacing`.
     obs: Observation,
     tree: NearestTree,
-    /// `obs`'s vertices as the trees store them.
-    keys: Vec<[f32; 3]>,
     /// Nearest answers kept between this frame's rounds, both ways (every start's rounds
     /// may share them: they hold for any pose).
     kept: std::sync::Mutex<(MovingQueries, MovingPoints)>,
@@ -619,13 +617,11 @@ impl<'a> Fitter<'a> {
             normals: keep.iter().map(|&i| obs.normals[i]).collect(),
             rho_p: keep.iter().map(|&i| obs.rho_p[i]).collect(),
         };
-        let keys: Vec<[f32; 3]> = obs.vertices.iter().map(key).collect();
-        let tree = NearestTree::from_keys(keys.clone());
+        let tree = NearestTree::new(&obs.vertices);
         Some(Prepared {
             observed: input_count,
             obs,
             tree,
-            keys,
             kept: Default::default(),
         })
     }
@@ -854,7 +850,7 @@ impl<'a> Fitter<'a> {
                     },
                     || {
                         let answers = self.time("nearest observed->model", || {
-                            to_model.kept(&prepared.keys, &keys)
+                            to_model.kept(obs_tree.keys(), &keys)
                         });
                         if answers.iter().all(|a| a.is_ok()) {
                             answers.into_iter().flatten().collect()
@@ -862,7 +858,7 @@ impl<'a> Fitter<'a> {
                             let model_tree =
                                 self.time("model tree", || NearestTree::from_keys(keys.clone()));
                             self.time("nearest observed->model", || {
-                                to_model.search(&prepared.keys, &model_tree, answers)
+                                to_model.search(obs_tree.keys(), &model_tree, answers)
                             })
                         }
                     },

@@ -58,6 +58,11 @@ impl NearestTree {
         &self.keys[i]
     }
 
+    /// Every point as the tree stores it, in index order.
+    pub fn keys(&self) -> &[[f32; 3]] {
+        &self.keys
+    }
+
     /// The nearest point to `q`: (index, squared distance in m^2); `None` for an empty
     /// tree.
     pub fn nearest(&self, q: &Vector3<f64>) -> Option<(usize, f64)> {
@@ -77,15 +82,7 @@ impl NearestTree {
     /// [`NearestTree::nearest`] for a query already turned to a [`key`], together with the
     /// squared distance of the second-nearest point (infinite when there is none), m^2.
     pub fn nearest_two(&self, q: &[f32; 3]) -> Option<(usize, f64, f64)> {
-        let tree = self.tree.as_ref()?;
-        let two = std::num::NonZeroUsize::new(2).expect("2 is not zero");
-        let found = tree
-            .query(q)
-            .nearest_n::<SquaredEuclidean<f32>>(two)
-            .execute();
-        let first = found.first()?;
-        let second = found.get(1).map_or(f64::INFINITY, |n| n.distance as f64);
-        Some((first.item as usize, first.distance as f64, second))
+        self.nearest_two_within(q, f64::INFINITY)
     }
 
     /// [`NearestTree::nearest_two`] searching only within `radius` metres of `q`: the
