@@ -3,7 +3,7 @@
 //! and is flagged; damaged observations never put NaN into a pose; a lost fit's restarts
 //! never repeat a start.
 
-use hullpose::fit::{FitParams, FitStatus, Fitter, Method, Observation, Solver};
+use hullpose::fit::{FitDiagnostics, FitParams, FitStatus, Fitter, Method, Observation, Solver};
 use hullpose::skeleton::{pose::joints, Pose, Skeleton};
 use hullpose::synth::{SceneKind, SynthOptions};
 use nalgebra::Vector3;
@@ -106,8 +106,9 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     assert!(r.pose.is_finite());
     assert!(r.diagnostics.energy.is_finite() && r.diagnostics.rms.is_finite());
     assert!(joint_error(&skeleton, &r.pose, &poses[5].1) < 0.004);
-    // A fit that hits the round cap is tried again from the other starts, each once: from
-    // the reference pose (the frame after t0) the other starts are that same pose, so none;
+    // A fit that hits the round cap (with the previous frame's score unknown, or its own
+    // score above 3 times that) is tried again from the other starts, each once: from the
+    // reference pose (the frame after t0) the other starts are that same pose, so none;
     // with a frame further back, the previous pose and the reference pose at its root.
     let capped = Fitter::new(
         &model,
@@ -118,10 +119,21 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     );
     let obs = observe(&mesh(dir.path(), 1));
     let reference = Pose::rest(skeleton.bones.len());
-    let r = capped.fit_tracked(&obs, &reference, None, Some(0.0));
+    let r = capped.fit_tracked(&obs, &reference, None, None);
     assert_eq!(r.diagnostics.status, FitStatus::IterationCap);
     assert_eq!(r.diagnostics.iterations, 2);
     let obs = observe(&mesh(dir.path(), 6));
-    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(0.0));
+    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
     assert_eq!(r.diagnostics.iterations, 6);
+    let previous_fit = |score: f64| FitDiagnostics {
+        score,
+        ..FitDiagnostics::unfitted(FitStatus::Converged, obs.vertices.len())
+    };
+    let far_lower = previous_fit(r.diagnostics.score / 10.0);
+    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&far_lower));
+    assert_eq!(r.diagnostics.iterations, 6);
+    // A capped fit whose score did not rise above the previous frame's is kept as it is.
+    let higher = previous_fit(r.diagnostics.score * 100.0);
+    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&higher));
+    assert_eq!(r.diagnostics.iterations, 2);
 }

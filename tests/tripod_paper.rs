@@ -159,7 +159,7 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     // Every tracked frame fitted (the contact frames may end circling in place or at the
     // round cap after the restarts; their accuracy is asserted below).
     assert!(diag[1..].iter().all(|x| matches!(
-        x.1,
+        x.1.status,
         hullpose::fit::FitStatus::Converged
             | hullpose::fit::FitStatus::Stalled
             | hullpose::fit::FitStatus::IterationCap

@@ -179,12 +179,14 @@ pub struct FitParams {
     /// Frames whose observed surface has fewer vertices than this share of the model's keep
     /// the previous pose (and are flagged). Default 0.05.
     pub min_observed_share: f64,
-    /// When a tracked frame's fit from its start hits the iteration cap or ends with more
-    /// than `restart_energy_ratio` times the previous frame's energy, it is fitted again
-    /// from two other starts (the other of `previous` and `predicted`, and the reference
-    /// pose at the previous root position; either is skipped when it equals a start
-    /// already tried) and the result with the lowest score is kept (eq. 4 weighted by rho_p
-    /// alone, [`Fitter::score`]). Default true.
+    /// When a tracked frame's fit from its start looks lost (its energy above
+    /// `restart_energy_ratio` times the previous frame's, a bone turned beyond
+    /// `restart_turn_deg`, or the iteration cap hit with the score above
+    /// `restart_energy_ratio` times the previous frame's: [`Fitter::lost`]), it is fitted
+    /// again from two other starts (the other of `previous` and `predicted`, and the
+    /// reference pose at the previous root position; either is skipped when it equals a
+    /// start already tried) and the result with the lowest score is kept (eq. 4 weighted by
+    /// rho_p alone, [`FitDiagnostics::score`]). Default true.
     pub restarts: bool,
     /// See `restarts`. Default 3.
     pub restart_energy_ratio: f64,
@@ -348,6 +350,9 @@ pub struct FitDiagnostics {
     pub downweighted_share: f64,
     /// Share of model vertices with rho_c < 0.5 (0 for methods without rho_c).
     pub contact_share: f64,
+    /// The fit's score at the final pose, m^2: the method's energy without rho_c
+    /// ([`Round::score`]; equal to `energy` for methods without rho_c).
+    pub score: f64,
     /// Observed vertices.
     pub observed: usize,
 }
@@ -363,6 +368,7 @@ impl FitDiagnostics {
             rms: 0.0,
             downweighted_share: 0.0,
             contact_share: 0.0,
+            score: 0.0,
             observed,
         }
     }
@@ -414,12 +420,26 @@ struct Round {
     /// R_c R_p.
     normalizer: f64,
     contact_share: f64,
+    /// `weighted_sq` and `normalizer` with rho_c taken as 1 (see [`Round::score`]).
+    scored_sq: f64,
+    score_normalizer: f64,
 }
 
 impl Round {
     /// Paper eq. 4 with these pairs and weights.
     fn energy(&self) -> f64 {
         self.weighted_sq / self.normalizer
+    }
+
+    /// The round's score, comparable between starts and frames, m^2: the method's own
+    /// energy with these pairs but without rho_c. The observed surface's weights do not
+    /// depend on the pose, so a fit cannot lower the score by pressing parts together, as it
+    /// can lower eq. 4 through rho_c (on the humanoid, choosing starts by eq. 4 picked a
+    /// pose 5 cm off at t23). A baseline is scored with its own weights only, never with
+    /// rho_p it does not use. (The `proposed` and `rho_p` methods pair alike, so this is
+    /// the `rho_p` method's energy at the same pose.)
+    fn score(&self) -> f64 {
+        self.scored_sq / self.score_normalizer
     }
 }
 
@@ -495,17 +515,17 @@ impl<'a> Fitter<'a> {
 
     /// Fits a tracked frame from the start `params.start` chooses (`previous` is the
     /// neighbour's pose, nearer t0; `before` the pose one frame further back), and when that
-    /// fit looks lost (iteration cap, energy above `restart_energy_ratio` times
-    /// `previous_energy`, or a bone turned more than `restart_turn_deg` from both the start
-    /// and `previous`) also from the other of the two and from the reference pose at the
-    /// previous root position; the lowest [`Fitter::score`] wins. `iterations` counts the
-    /// rounds of every start. A frame without enough observation keeps `previous`.
+    /// fit looks lost ([`Fitter::lost`]) also from the other of the two and from the
+    /// reference pose at the previous root position; the lowest score
+    /// ([`FitDiagnostics::score`]) wins. `iterations` counts the rounds of every start. A
+    /// frame without enough observation keeps `previous`. `previous_fit` is the fit of the
+    /// frame `previous` belongs to (none, or zero energy and score, when unknown).
     pub fn fit_tracked(
         &self,
         obs: &Observation,
         previous: &Pose,
         before: Option<&Pose>,
-        previous_energy: Option<f64>,
+        previous_fit: Option<&FitDiagnostics>,
     ) -> FitResult {
         let p = &self.params;
         let Some(prepared) = self.prepare(obs) else {
@@ -526,12 +546,7 @@ impl<'a> Fitter<'a> {
             _ => (previous.clone(), predicted.clone()),
         };
         let mut best = self.fit_prepared(&prepared, &first);
-        let lost = best.diagnostics.status == FitStatus::IterationCap
-            || previous_energy
-                .is_some_and(|e| e > 0.0 && best.diagnostics.energy > p.restart_energy_ratio * e)
-            || largest_turn_deg(&self.model.skeleton, &best.pose, &first, previous)
-                > p.restart_turn_deg;
-        if !p.restarts || !lost {
+        if !p.restarts || !self.lost(&best, &first, previous, previous_fit) {
             return best;
         }
         let mut rest = Pose::rest(previous.rotations.len());
@@ -545,14 +560,12 @@ impl<'a> Fitter<'a> {
             }
         }
         let (mut rounds, mut steps) = (best.diagnostics.iterations, best.diagnostics.lm_steps);
-        let mut best_score = self.score(&prepared, &best.pose);
         for start in &starts {
             let r = self.fit_prepared(&prepared, start);
             rounds += r.diagnostics.iterations;
             steps += r.diagnostics.lm_steps;
-            let score = self.score(&prepared, &r.pose);
-            if score < best_score {
-                (best, best_score) = (r, score);
+            if r.diagnostics.score < best.diagnostics.score {
+                best = r;
             }
         }
         best.diagnostics.iterations = rounds;
@@ -560,18 +573,34 @@ impl<'a> Fitter<'a> {
         best
     }
 
-    /// A fit's score, comparable between starts of one frame, m^2: the method's own energy
-    /// without rho_c. The observed surface's weights do not depend on the pose, so a start
-    /// cannot lower the score by pressing parts together, as it can lower eq. 4 through
-    /// rho_c (on the humanoid, choosing by eq. 4 picked a pose 5 cm off at t23). A baseline
-    /// is scored with its own weights only, never with rho_p it does not use.
-    fn score(&self, prepared: &Prepared, pose: &Pose) -> f64 {
-        let method = match self.params.method {
-            Method::Proposed | Method::RhoP => Method::RhoP,
-            Method::RhoC | Method::Icp => Method::Icp,
-            Method::Normals => Method::Normals,
+    /// Whether a tracked frame's fit from `start` looks lost, so that other starts are
+    /// tried (`params.restarts`):
+    /// - its eq. 4 energy is above `restart_energy_ratio` times the previous frame's;
+    /// - some bone turned more than `restart_turn_deg` from both `start` and `previous`;
+    /// - it hit the iteration cap and its score is above `restart_energy_ratio` times the
+    ///   previous frame's (or that is unknown). A capped fit whose score stayed level is
+    ///   sliding or circling near its answer: restarting the tripod's t11 from two farther
+    ///   starts took 617 more rounds and kept the first fit. A capped fit whose score rose
+    ///   has pressed parts into each other where rho_c hides them (the humanoid's t23: eq.
+    ///   4 level with t22, the score 39 times t22's; the reference pose wins there).
+    fn lost(
+        &self,
+        fit: &FitResult,
+        start: &Pose,
+        previous: &Pose,
+        previous_fit: Option<&FitDiagnostics>,
+    ) -> bool {
+        let p = &self.params;
+        let d = &fit.diagnostics;
+        let rose = |now: f64, before: Option<f64>| {
+            before.is_some_and(|b| b > 0.0 && now > p.restart_energy_ratio * b)
         };
-        self.round(method, prepared, pose).energy()
+        let score_known = previous_fit.is_some_and(|f| f.score > 0.0);
+        rose(d.energy, previous_fit.map(|f| f.energy))
+            || largest_turn_deg(&self.model.skeleton, &fit.pose, start, previous)
+                > p.restart_turn_deg
+            || (d.status == FitStatus::IterationCap
+                && (!score_known || rose(d.score, previous_fit.map(|f| f.score))))
     }
 
     /// The result for a frame with too little usable observation: `pose` kept, flagged.
@@ -890,11 +919,20 @@ impl<'a> Fitter<'a> {
                 Method::Proposed => rho_c[v] * obs.rho_p[u],
             }
         };
+        // The weight without rho_c ([`Round::score`]).
+        let score_weight = |v: usize, u: usize| -> f64 {
+            match method {
+                Method::RhoC => 1.0,
+                Method::Proposed => obs.rho_p[u],
+                Method::Icp | Method::Normals | Method::RhoP => weight(v, u),
+            }
+        };
         self.time("pairs, weights", || {
             let n = posed.len();
             let mut w_sum = vec![0.0; n];
             let mut target = vec![Vector3::zeros(); n];
             let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
+            let mut scored_sq = 0.0;
             let mut add = |v: usize, u: usize, d2: f64| {
                 let w = if d2.is_finite() { weight(v, u) } else { 0.0 };
                 if w < 0.5 {
@@ -905,6 +943,14 @@ impl<'a> Fitter<'a> {
                     target[v] += w * obs.vertices[u];
                     weighted_sq += w * d2;
                     weight_sum += w;
+                }
+                let ws = if d2.is_finite() {
+                    score_weight(v, u)
+                } else {
+                    0.0
+                };
+                if ws > 0.0 {
+                    scored_sq += ws * d2;
                 }
             };
             for (v, &(u, d2)) in forward.iter().enumerate() {
@@ -925,6 +971,12 @@ impl<'a> Fitter<'a> {
             } else {
                 obs.vertices.len() as f64
             };
+            let n_obs = obs.vertices.len() as f64;
+            let score_normalizer = n as f64
+                * match method {
+                    Method::Proposed | Method::RhoP => obs.rho_p.iter().sum(),
+                    _ => n_obs,
+                };
             Round {
                 targets: Targets {
                     pulls,
@@ -936,6 +988,8 @@ impl<'a> Fitter<'a> {
                 downweighted,
                 normalizer: (r_c * r_p).max(1e-300),
                 contact_share: rho_c.iter().filter(|&&r| r < 0.5).count() as f64 / n.max(1) as f64,
+                scored_sq,
+                score_normalizer: score_normalizer.max(1e-300),
             }
         })
     }
@@ -1035,6 +1089,7 @@ fn finish(pose: Pose, round: &Round, mut diagnostics: FitDiagnostics) -> FitResu
     diagnostics.rms = (round.weighted_sq / round.weight_sum.max(1e-300)).sqrt();
     diagnostics.downweighted_share = round.downweighted as f64 / round.pairs.max(1) as f64;
     diagnostics.contact_share = round.contact_share;
+    diagnostics.score = round.score();
     FitResult { pose, diagnostics }
 }
 

@@ -17,7 +17,7 @@ use std::path::Path;
 
 /// Header of the diagnostics CSV.
 pub const DIAGNOSTICS_HEADER: &str =
-    "frame,status,iterations,lm_steps,energy,rms_m,downweighted_share,contact_share,observed";
+    "frame,status,iterations,lm_steps,energy,rms_m,downweighted_share,contact_share,observed,score";
 
 /// The per-frame file names: (pose, joints, diagnostics, mesh).
 pub fn files(frame: u32) -> [String; 4] {
@@ -37,7 +37,7 @@ pub(super) fn sources(_ctx: &Context, _frame: u32, _key: &mut KeyBuilder) -> Res
 /// One diagnostics row (no header).
 pub fn diagnostics_row(frame: u32, d: &FitDiagnostics) -> String {
     format!(
-        "{frame},{},{},{},{:e},{:.6},{:.4},{:.4},{}",
+        "{frame},{},{},{},{:e},{:.6},{:.4},{:.4},{},{:e}",
         d.status.name(),
         d.iterations,
         d.lm_steps,
@@ -45,7 +45,8 @@ pub fn diagnostics_row(frame: u32, d: &FitDiagnostics) -> String {
         d.rms,
         d.downweighted_share,
         d.contact_share,
-        d.observed
+        d.observed,
+        d.score
     )
 }
 
@@ -84,16 +85,15 @@ pub fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pos
         .ok_or_else(|| Error::invalid(&path, format!("holds no pose for frame {frame}")))
 }
 
-/// The final energy of a cached frame's fit (0 for the reference frame).
-fn cached_energy(ctx: &Context, frame: u32) -> Result<f64> {
+/// The diagnostics of a cached frame's fit.
+fn cached_diagnostics(ctx: &Context, frame: u32) -> Result<FitDiagnostics> {
     let path = ctx.cache.stage_dir("fit").join(&files(frame)[2]);
     let text = crate::fsutil::read_to_string(&path)?;
-    let rows = parse_diagnostics(&path, &text)?;
-    // The rest after status: iterations, lm_steps, energy, ...
-    rows.iter()
+    parse_diagnostics(&path, &text)?
+        .into_iter()
         .find(|r| r.0 == frame)
-        .and_then(|r| r.2.split(',').nth(2).and_then(|e| e.parse::<f64>().ok()))
-        .ok_or_else(|| Error::invalid(&path, format!("holds no energy for frame {frame}")))
+        .map(|r| r.1)
+        .ok_or_else(|| Error::invalid(&path, format!("holds no row for frame {frame}")))
 }
 
 /// Tracks `frames` (in computation order, t0 first, as [`crate::runner::Job::tracked_frames`]
@@ -108,7 +108,7 @@ pub fn track(
     let model = super::model::load(ctx)?;
     let t0 = model.skeleton.reference_frame;
     let fitter = Fitter::new(&model, params.clone());
-    let mut done: std::collections::HashMap<u32, (Pose, f64)> = Default::default();
+    let mut done: std::collections::HashMap<u32, (Pose, FitDiagnostics)> = Default::default();
     let mut out = Vec::with_capacity(frames.len());
     let mut seconds = Vec::with_capacity(frames.len());
     for &frame in frames {
@@ -119,19 +119,20 @@ pub fn track(
         } else {
             let seq = ctx.sequence;
             let previous = seq.tracked_previous(frame, t0);
-            let (start, energy) = previous
-                .and_then(|f| done.get(&f))
-                .cloned()
-                .unwrap_or_else(|| (Pose::rest(model.skeleton.bones.len()), 0.0));
+            let rest = Pose::rest(model.skeleton.bones.len());
+            let (start, previous_fit) = match previous.and_then(|f| done.get(&f)) {
+                Some((pose, fit)) => (pose, Some(fit)),
+                None => (&rest, None),
+            };
             let before = previous
                 .and_then(|f| seq.tracked_previous(f, t0))
                 .and_then(|f| done.get(&f))
-                .map(|x| x.0.clone());
-            fitter.fit_tracked(&obs, &start, before.as_ref(), Some(energy))
+                .map(|x| &x.0);
+            fitter.fit_tracked(&obs, start, before, previous_fit)
         };
         seconds.push((frame, started.elapsed().as_secs_f64()));
         let carried = as_cached(&model.skeleton, frame, &result.pose)?;
-        done.insert(frame, (carried, result.diagnostics.energy));
+        done.insert(frame, (carried, result.diagnostics.clone()));
         out.push((frame, result));
         progress(frame);
     }
@@ -186,8 +187,8 @@ pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
             Some(f) => Some(cached_pose(ctx, &model.skeleton, f)?),
             None => None,
         };
-        let energy = cached_energy(ctx, previous)?;
-        fitter.fit_tracked(&obs, &start, before.as_ref(), Some(energy))
+        let previous_fit = cached_diagnostics(ctx, previous)?;
+        fitter.fit_tracked(&obs, &start, before.as_ref(), Some(&previous_fit))
     };
     write_frame(ctx, &model, frame, &result)
 }
@@ -288,22 +289,55 @@ pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
     })
 }
 
-/// Parses a diagnostics CSV (the per-frame file or fit.csv): (frame, status, rest).
-pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitStatus, String)>> {
+/// Parses a diagnostics CSV (the per-frame file or fit.csv): (frame, diagnostics) per row.
+pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitDiagnostics)>> {
     let mut lines = text.lines();
     if lines.next() != Some(DIAGNOSTICS_HEADER) {
         return Err(Error::invalid(
             path,
-            format!("the first line must be '{DIAGNOSTICS_HEADER}'"),
+            format!(
+                "the first line must be '{DIAGNOSTICS_HEADER}' (a cache from an older \
+                 version: run the fit stage again with --force)"
+            ),
         ));
     }
     let mut out = Vec::new();
     for (i, line) in lines.enumerate() {
-        let mut parts = line.splitn(3, ',');
-        let bad = || Error::invalid(path, format!("line {}: not a diagnostics row", i + 2));
-        let frame: u32 = parts.next().and_then(|x| x.parse().ok()).ok_or_else(bad)?;
-        let status = parts.next().and_then(FitStatus::parse).ok_or_else(bad)?;
-        out.push((frame, status, parts.next().unwrap_or("").to_string()));
+        let bad = || {
+            Error::invalid(
+                path,
+                format!(
+                    "line {}: not a diagnostics row ({DIAGNOSTICS_HEADER})",
+                    i + 2
+                ),
+            )
+        };
+        let parts: Vec<&str> = line.split(',').collect();
+        let [frame, status, iterations, lm_steps, energy, rms, downweighted, contact, observed, score] =
+            parts[..]
+        else {
+            return Err(bad());
+        };
+        let int = |x: &str| x.parse::<usize>().map_err(|_| bad());
+        let real = |x: &str| {
+            x.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(bad)
+        };
+        let frame: u32 = frame.parse().map_err(|_| bad())?;
+        let diagnostics = FitDiagnostics {
+            status: FitStatus::parse(status).ok_or_else(bad)?,
+            iterations: int(iterations)?,
+            lm_steps: int(lm_steps)?,
+            energy: real(energy)?,
+            rms: real(rms)?,
+            downweighted_share: real(downweighted)?,
+            contact_share: real(contact)?,
+            observed: int(observed)?,
+            score: real(score)?,
+        };
+        out.push((frame, diagnostics));
     }
     Ok(out)
 }
