@@ -388,8 +388,9 @@ pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) 
         None => Vec::new(),
     };
     let mut out = format!(
-        "tracking, method {}, sample_spacing {} m\n  frame  seconds  rounds  error_cm     rms_mm  status\n",
+        "tracking, method {}, model_spacing {} m, sample_spacing {} m\n  frame  seconds  rounds  error_cm     rms_mm  status\n",
         params.method.name(),
+        params.model_spacing,
         params.sample_spacing
     );
     let (mut fitted, mut seconds, mut rounds) = (0usize, 0.0, 0usize);
@@ -432,7 +433,8 @@ pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) 
 }
 
 /// The fit's steps on one frame (needs the model and the frame's reliability in the cache):
-/// one tracked fit from t0's pose, with `spacing` (the fit's sample_spacing), reporting the
+/// one tracked fit from t0's pose, with `spacing` (the fit's sample_spacing and
+/// model_spacing both, when given), reporting the
 /// vertex counts and the time per round of each step.
 pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
     let ctx = job.context();
@@ -440,9 +442,10 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
     let mut params = job.config.fit.clone();
     if let Some(s) = spacing {
         params.sample_spacing = s;
+        params.model_spacing = s;
     }
     let obs = crate::stages::fit::observation(&ctx, frame)?;
-    let model_count = crate::fit::thin(&model.mesh.vertices, params.sample_spacing).len();
+    let model_count = crate::fit::thin(&model.mesh.vertices, params.model_spacing).len();
     let obs_count = crate::fit::thin(&obs.vertices, params.sample_spacing).len();
     let t = Instant::now();
     let fitter = crate::fit::Fitter::new(&model, params.clone());
@@ -453,8 +456,9 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
     let total = t.elapsed().as_secs_f64();
     let rounds = result.diagnostics.iterations.max(1) as f64;
     let mut out = format!(
-        "fit of frame {frame} from t0's pose, method {}: {model_count} model and {obs_count} observed vertices (sample_spacing {} m)\n  setup {:.1} ms, fit {:.3} s, {} rounds ({:?})\n  per round:\n",
+        "fit of frame {frame} from t0's pose, method {}: {model_count} model and {obs_count} observed vertices (model_spacing {} m, sample_spacing {} m)\n  setup {:.1} ms, fit {:.3} s, {} rounds ({:?})\n  per round:\n",
         params.method.name(),
+        params.model_spacing,
         params.sample_spacing,
         setup * 1e3,
         total,

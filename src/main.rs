@@ -238,7 +238,7 @@ enum BenchWhat {
         file: PathBuf,
         #[arg(long, default_value_t = 1)]
         frame: u32,
-        /// Override fit.sample_spacing (metres; 0 keeps every vertex).
+        /// Override fit.sample_spacing and fit.model_spacing (metres; 0 keeps every vertex).
         #[arg(long)]
         spacing: Option<f64>,
     },

@@ -132,6 +132,8 @@ fn fit_solver_setting_out_of_range_names_the_key() {
         ),
         ("  tangential_weight: 1.5\n", "tangential_weight"),
         ("  solver: newton\n", "solver"),
+        ("  model_spacing: -0.01\n", "model_spacing"),
+        ("  sample_spacing: -1\n", "sample_spacing"),
     ] {
         let err = check_fails(|d| {
             let p = d.join("pipeline.yaml");
