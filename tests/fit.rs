@@ -114,6 +114,7 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
         &model,
         FitParams {
             max_iterations: 2,
+            restart_max_iterations: 2,
             ..Default::default()
         },
     );
@@ -136,4 +137,15 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let higher = previous_fit(r.diagnostics.score * 100.0);
     let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&higher));
     assert_eq!(r.diagnostics.iterations, 2);
+    // Restarts have a cap of their own (`restart_max_iterations`).
+    let longer = Fitter::new(
+        &model,
+        FitParams {
+            max_iterations: 2,
+            restart_max_iterations: 3,
+            ..Default::default()
+        },
+    );
+    let r = longer.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
+    assert_eq!(r.diagnostics.iterations, 2 + 3 + 3);
 }

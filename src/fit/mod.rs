@@ -206,6 +206,10 @@ pub struct FitParams {
     /// Default 60 (the humanoid's limbs turn at most 74 degrees between frames, the
     /// tripod's 11; its right hand folded back 98 to 154 degrees without this check).
     pub restart_turn_deg: f64,
+    /// Rounds per restart at most (see `restarts`). Default 400: a restart begins farther
+    /// from the answer than the prediction, and with `max_iterations` rounds the humanoid's
+    /// restarts at t22 all ended with the right hand folded back (its tip 29 cm off).
+    pub restart_max_iterations: usize,
 }
 
 impl Default for FitParams {
@@ -232,6 +236,7 @@ impl Default for FitParams {
             restarts: true,
             restart_energy_ratio: 3.0,
             restart_turn_deg: 60.0,
+            restart_max_iterations: 400,
         }
     }
 }
@@ -256,8 +261,10 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
             p.tangential_weight
         ));
     }
-    if p.max_iterations == 0 || p.lm_steps == 0 {
-        return Err("fit: max_iterations and lm_steps must be at least 1".into());
+    if p.max_iterations == 0 || p.lm_steps == 0 || p.restart_max_iterations == 0 {
+        return Err(
+            "fit: max_iterations, restart_max_iterations and lm_steps must be at least 1".into(),
+        );
     }
     for (key, spacing) in [
         ("sample_spacing", p.sample_spacing),
@@ -560,7 +567,7 @@ impl<'a> Fitter<'a> {
             (Some(pred), Start::Predicted) => (pred.clone(), Some(previous.clone())),
             _ => (previous.clone(), predicted.clone()),
         };
-        let mut best = self.fit_prepared(&prepared, &first);
+        let mut best = self.fit_prepared(&prepared, &first, p.max_iterations);
         if !p.restarts || !self.lost(&best, &first, previous, previous_fit) {
             return best;
         }
@@ -576,7 +583,7 @@ impl<'a> Fitter<'a> {
         }
         let (mut rounds, mut steps) = (best.diagnostics.iterations, best.diagnostics.lm_steps);
         for start in &starts {
-            let r = self.fit_prepared(&prepared, start);
+            let r = self.fit_prepared(&prepared, start, p.restart_max_iterations);
             rounds += r.diagnostics.iterations;
             steps += r.diagnostics.lm_steps;
             if r.diagnostics.score < best.diagnostics.score {
@@ -674,28 +681,29 @@ impl<'a> Fitter<'a> {
     /// keeps `start`.
     pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
         match self.prepare(obs) {
-            Some(prepared) => self.fit_prepared(&prepared, start),
+            Some(prepared) => self.fit_prepared(&prepared, start, self.params.max_iterations),
             None => self.unobserved(obs, start),
         }
     }
 
-    fn fit_prepared(&self, prepared: &Prepared, start: &Pose) -> FitResult {
+    /// Fits from `start` in at most `cap` rounds.
+    fn fit_prepared(&self, prepared: &Prepared, start: &Pose, cap: usize) -> FitResult {
         let round = self.round(self.params.method, prepared, start);
         let diagnostics = FitDiagnostics::unfitted(FitStatus::IterationCap, prepared.observed);
         let pose = start.clone();
         match self.params.solver {
-            Solver::Alternating => self.fit_alternating(prepared, (pose, round, diagnostics)),
-            Solver::Direct => self.fit_direct(prepared, (pose, round, diagnostics)),
+            Solver::Alternating => self.fit_alternating(prepared, (pose, round, diagnostics), cap),
+            Solver::Direct => self.fit_direct(prepared, (pose, round, diagnostics), cap),
         }
     }
 
     /// [`Solver::Direct`]: one damped step per round, kept when the round at the new pose
     /// has a lower eq. 4 energy than the round it started from.
-    fn fit_direct(&self, prepared: &Prepared, from: FitStart) -> FitResult {
+    fn fit_direct(&self, prepared: &Prepared, from: FitStart, cap: usize) -> FitResult {
         let (mut pose, mut round, mut diagnostics) = from;
         let p = &self.params;
         let mut lambda = 1e-3;
-        'rounds: while diagnostics.iterations < p.max_iterations {
+        'rounds: while diagnostics.iterations < cap {
             let problem = self.held(&round);
             let system = |tangential: f64| {
                 self.time("lm steps", || problem.normal_equations(&pose, tangential))
@@ -703,7 +711,7 @@ impl<'a> Fitter<'a> {
             let (mut h, mut g, _) = system(p.tangential_weight);
             let mut point_to_point = false;
             loop {
-                if diagnostics.iterations >= p.max_iterations {
+                if diagnostics.iterations >= cap {
                     break 'rounds;
                 }
                 let Some(delta) = solve::damped_step(&h, &g, lambda) else {
@@ -761,13 +769,13 @@ impl<'a> Fitter<'a> {
     }
 
     /// [`Solver::Alternating`].
-    fn fit_alternating(&self, prepared: &Prepared, from: FitStart) -> FitResult {
+    fn fit_alternating(&self, prepared: &Prepared, from: FitStart, cap: usize) -> FitResult {
         let (mut pose, mut round, mut diagnostics) = from;
         let p = &self.params;
         let mut lambda = 1e-3;
         let mut accel = anderson::Anderson::new(p.acceleration);
         let mut stall = StallWatch::new(p.stall_rounds, joints_of(self.model, &pose));
-        while diagnostics.iterations < p.max_iterations {
+        while diagnostics.iterations < cap {
             let (stepped, report) = self.time("lm steps", || {
                 let problem = self.held(&round);
                 solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut lambda)
