@@ -110,14 +110,17 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     // score above 3 times that) is tried again from the other starts, each once: from the
     // reference pose (the frame after t0) the other starts are that same pose, so none;
     // with a frame further back, the previous pose and the reference pose at its root.
-    let capped = Fitter::new(
-        &model,
-        FitParams {
-            max_iterations: 2,
-            restart_max_iterations: 2,
-            ..Default::default()
-        },
-    );
+    let capped_at = |max_iterations, restart_max_iterations| {
+        Fitter::new(
+            &model,
+            FitParams {
+                max_iterations,
+                restart_max_iterations,
+                ..Default::default()
+            },
+        )
+    };
+    let capped = capped_at(2, 2);
     let obs = observe(&mesh(dir.path(), 1));
     let reference = Pose::rest(skeleton.bones.len());
     let r = capped.fit_tracked(&obs, &reference, None, None);
@@ -138,14 +141,6 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&higher));
     assert_eq!(r.diagnostics.iterations, 2);
     // Restarts have a cap of their own (`restart_max_iterations`).
-    let longer = Fitter::new(
-        &model,
-        FitParams {
-            max_iterations: 2,
-            restart_max_iterations: 3,
-            ..Default::default()
-        },
-    );
-    let r = longer.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
+    let r = capped_at(2, 3).fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
     assert_eq!(r.diagnostics.iterations, 2 + 3 + 3);
 }

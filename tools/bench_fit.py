@@ -51,26 +51,24 @@ def main():
     a = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(fibonacci(50_000, 0.5)))
     b = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(fibonacci(50_000, 0.5) + [0.01, 0.0, 0.0]))
     est = o3d.pipelines.registration.TransformationEstimationPointToPoint()
-    crit = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=1)
-    best = 1e9
-    for _ in range(5):
-        t = time.perf_counter()
-        o3d.pipelines.registration.registration_icp(a, b, 0.05, np.eye(4), est, crit)
-        best = min(best, time.perf_counter() - t)
-    print(f"open3d point-to-point ICP, one iteration, 50k + 50k points: {best * 1e3:.1f} ms")
-    # A call of one iteration also builds the target's k-d tree and evaluates the start and
-    # end poses. The cost of one more iteration inside a longer run, from calls of 11 and 31
-    # iterations (no early stop), leaves those out.
-    def run(iterations):
+
+    def fastest_call(iterations, repeats):
+        """Seconds of the fastest of `repeats` ICP calls of exactly `iterations` iterations."""
         crit = o3d.pipelines.registration.ICPConvergenceCriteria(
             relative_fitness=0.0, relative_rmse=0.0, max_iteration=iterations)
         fastest = 1e9
-        for _ in range(3):
+        for _ in range(repeats):
             t = time.perf_counter()
             o3d.pipelines.registration.registration_icp(a, b, 0.05, np.eye(4), est, crit)
             fastest = min(fastest, time.perf_counter() - t)
         return fastest
-    marginal = (run(31) - run(11)) / 20
+
+    best = fastest_call(1, 5)
+    print(f"open3d point-to-point ICP, one iteration, 50k + 50k points: {best * 1e3:.1f} ms")
+    # A call of one iteration also builds the target's k-d tree and evaluates the start and
+    # end poses. The cost of one more iteration inside a longer run, from calls of 11 and 31
+    # iterations (no early stop), leaves those out.
+    marginal = (fastest_call(31, 3) - fastest_call(11, 3)) / 20
     print(f"open3d point-to-point ICP, one more iteration within a run, 50k + 50k points: "
           f"{marginal * 1e3:.1f} ms")
 
