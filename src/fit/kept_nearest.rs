@@ -11,8 +11,10 @@
 //! tree measures in, the reused answer is the one a fresh search would give: same point,
 //! same squared distance ([`key_distance2`] is the tree's own arithmetic).
 
+use crate::geometry::cell_grid::{CellGrid, TwoNearest};
 use crate::geometry::nearest::{key_distance2, NearestTree};
 use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// How far beyond the previous partner's distance a search looks for the second-nearest
 /// point, metres. The previous partner bounds the search, which makes it about as fast as a
@@ -51,21 +53,40 @@ fn key_distance(a: &[f32; 3], b: &[f32; 3]) -> f64 {
     key_distance2_f64(a, b).sqrt()
 }
 
+/// Where fresh answers come from: a [`CellGrid`] over the points for the short bounded
+/// searches, and the k-d tree over the same points (built only when first asked for) for
+/// the first, unbounded search and for the grid's [`TwoNearest::Unsure`] answers.
+pub struct Searcher<'a> {
+    pub grid: &'a CellGrid,
+    pub tree: &'a (dyn Fn() -> &'a NearestTree + Sync),
+}
+
 /// A fresh search. `bound` is the current distance of the point that was nearest before,
 /// metres, so the nearest is within it; the search then also finds the second-nearest up
 /// to [`SECOND_REACH`] farther. Without one (infinite: the first search) the second is not
-/// looked for, as the first rounds move too far for an answer to be kept.
+/// looked for, as the first rounds move too far for an answer to be kept. The answers are
+/// the k-d tree's (the grid's equal them, and it defers to the tree where it cannot).
 fn search<When>(
-    tree: &NearestTree,
+    from: &Searcher,
     q: &[f32; 3],
     bound: f64,
     when: When,
 ) -> (Option<Kept<When>>, (usize, f64)) {
     let found = if bound.is_finite() {
-        tree.nearest_two_within(q, bound + SECOND_REACH)
-            .or_else(|| tree.nearest_two(q))
+        let radius = bound + SECOND_REACH;
+        match from.grid.nearest_two_within(q, radius) {
+            TwoNearest::Found(item, d2, second2) => Some((item, d2, second2)),
+            TwoNearest::None => (from.tree)().nearest_two(q),
+            TwoNearest::Unsure => {
+                let tree = (from.tree)();
+                tree.nearest_two_within(q, radius)
+                    .or_else(|| tree.nearest_two(q))
+            }
+        }
     } else {
-        tree.nearest_key(q).map(|(item, d2)| (item, d2, 0.0))
+        (from.tree)()
+            .nearest_key(q)
+            .map(|(item, d2)| (item, d2, 0.0))
     };
     match found {
         Some((item, d2, second2)) => (
@@ -91,8 +112,16 @@ pub struct MovingQueries {
 
 impl MovingQueries {
     /// Each query's nearest point in `tree`: (index, squared distance in m^2 as the tree
-    /// measures it), (0, inf) for an empty tree. `tree` must be the same in every call.
-    pub fn partners(&mut self, queries: &[[f32; 3]], tree: &NearestTree) -> Vec<(usize, f64)> {
+    /// measures it), (0, inf) for an empty tree. `tree` and `grid` (a [`CellGrid`] over the
+    /// tree's points) must be the same in every call.
+    pub fn partners(
+        &mut self,
+        queries: &[[f32; 3]],
+        tree: &NearestTree,
+        grid: &CellGrid,
+    ) -> Vec<(usize, f64)> {
+        let whole = || tree;
+        let from = Searcher { grid, tree: &whole };
         if self.kept.len() != queries.len() {
             self.kept = vec![None; queries.len()];
         }
@@ -110,7 +139,7 @@ impl MovingQueries {
                     }
                     bound = d2.sqrt();
                 }
-                let (fresh, (item, d2)) = search(tree, q, bound, *q);
+                let (fresh, (item, d2)) = search(&from, q, bound, *q);
                 *kept = fresh;
                 (item, d2, false)
             })
@@ -133,6 +162,9 @@ pub struct MovingPoints {
     last: Vec<[f32; 3]>,
     /// The running sum of the points' largest motion per call, metres.
     path: f64,
+    /// The points of the last call in cells, for [`MovingPoints::search`] (rebuilt by the
+    /// caller, in place).
+    pub grid: CellGrid,
     /// Answers reused, over every call (for benchmarks).
     pub reused: usize,
 }
@@ -178,22 +210,27 @@ impl MovingPoints {
         answers
     }
 
-    /// Fills the answers [`MovingPoints::kept`] left out by searching `tree`, built over the
-    /// points given to that call, and keeps them.
+    /// Fills the answers [`MovingPoints::kept`] left out by searching [`MovingPoints::grid`],
+    /// which must hold the `points` given to that call (a k-d tree over them is built where
+    /// the grid defers to one), and keeps them.
     pub fn search(
         &mut self,
         queries: &[[f32; 3]],
-        tree: &NearestTree,
+        points: &[[f32; 3]],
         answers: Vec<Result<(usize, f64), f64>>,
     ) -> Vec<(usize, f64)> {
         let path = self.path;
+        let grid = &self.grid;
+        let tree = OnceLock::new();
+        let whole = || tree.get_or_init(|| NearestTree::from_keys(points.to_vec()));
+        let from = Searcher { grid, tree: &whole };
         self.kept
             .par_iter_mut()
             .zip(queries)
             .zip(answers)
             .map(|((kept, q), answer)| {
                 answer.unwrap_or_else(|bound| {
-                    let (fresh, found) = search(tree, q, bound, path);
+                    let (fresh, found) = search(&from, q, bound, path);
                     *kept = fresh;
                     found
                 })
@@ -238,11 +275,12 @@ mod tests {
     fn moving_queries_agree_with_fresh_searches() {
         let (fixed, _) = lattice(3, 2000);
         let tree = NearestTree::from_keys(fixed.clone());
+        let grid = CellGrid::new(&fixed, 0.01);
         let (mut queries, mut rnd) = lattice(5, 1500);
         walk(&mut queries, &mut rnd, 0.002);
         let mut kept = MovingQueries::default();
         for round in 0..30 {
-            let got = kept.partners(&queries, &tree);
+            let got = kept.partners(&queries, &tree, &grid);
             for (q, g) in queries.iter().zip(&got) {
                 assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
             }
@@ -266,8 +304,9 @@ mod tests {
         for round in 0..30 {
             let tree = NearestTree::from_keys(points.clone());
             let answers = kept.kept(&queries, &points);
+            kept.grid.rebuild(&points, 0.01);
             searched += answers.iter().filter(|a| a.is_err()).count();
-            let got = kept.search(&queries, &tree, answers);
+            let got = kept.search(&queries, &points, answers);
             for (q, g) in queries.iter().zip(&got) {
                 assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
             }

@@ -16,6 +16,7 @@ pub mod kept_nearest;
 mod moments;
 pub mod solve;
 
+use crate::geometry::cell_grid::CellGrid;
 use crate::geometry::nearest::{key, NearestTree};
 use crate::geometry::TriMesh;
 use crate::skeleton::model::BodyModel;
@@ -27,6 +28,11 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use solve::{HeldProblem, Targets};
+
+/// The cell edge of the grids that answer the short nearest searches between rounds
+/// ([`kept_nearest`]), metres: about the surfaces' spacing, so a search within a centimetre
+/// or two visits a few cells of a point or two each.
+const SEARCH_CELL: f64 = 0.02;
 
 /// Which weights the energy uses: the paper's method and the baselines it compares with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -424,6 +430,8 @@ struct Prepared {
     /// Finite observed vertices thinned to `sample_spacing`.
     obs: Observation,
     tree: NearestTree,
+    /// The same points in cells of [`SEARCH_CELL`], for the short searches.
+    grid: CellGrid,
     /// Nearest answers kept between this frame's rounds, both ways (every start's rounds
     /// may share them: they hold for any pose).
     kept: std::sync::Mutex<(MovingQueries, MovingPoints)>,
@@ -669,7 +677,9 @@ impl<'a> Fitter<'a> {
             rho_p: keep.iter().map(|&i| obs.rho_p[i]).collect(),
         };
         let tree = NearestTree::new(&obs.vertices);
+        let grid = CellGrid::new(tree.keys(), SEARCH_CELL);
         Some(Prepared {
+            grid,
             observed: input_count,
             obs,
             tree,
@@ -897,7 +907,7 @@ impl<'a> Fitter<'a> {
                 let (forward, backward) = rayon::join(
                     || {
                         self.time("nearest model->observed", || {
-                            to_observed.partners(&keys, obs_tree)
+                            to_observed.partners(&keys, obs_tree, &prepared.grid)
                         })
                     },
                     || {
@@ -907,10 +917,9 @@ impl<'a> Fitter<'a> {
                         if answers.iter().all(|a| a.is_ok()) {
                             answers.into_iter().flatten().collect()
                         } else {
-                            let model_tree =
-                                self.time("model tree", || NearestTree::from_keys(keys.clone()));
+                            self.time("model grid", || to_model.grid.rebuild(&keys, SEARCH_CELL));
                             self.time("nearest observed->model", || {
-                                to_model.search(obs_tree.keys(), &model_tree, answers)
+                                to_model.search(obs_tree.keys(), &keys, answers)
                             })
                         }
                     },
