@@ -330,7 +330,7 @@ pub fn nearest(points: usize, queries: usize) -> String {
         .map(|x| tree.nearest_two(x).map_or(0.0, |n| n.2))
         .sum();
     let two = t.elapsed().as_secs_f64();
-    format!(
+    let mut out = format!(
         "kiddo nearest: {points} points, {queries} queries\n  build {:.1} ms\n  1 thread: {:.2} M queries/s\n  {} threads: {:.2} M queries/s\n  1 thread, with the second nearest: {:.2} M queries/s\n  (mean squared distance {:.3e} / {:.3e} m^2, second {:.3e})\n",
         build * 1e3,
         queries as f64 / one / 1e6,
@@ -340,6 +340,57 @@ pub fn nearest(points: usize, queries: usize) -> String {
         sum1 / queries as f64,
         sum2 / queries as f64,
         sum3 / queries as f64
+    );
+    out.push_str(&bounded_two_nearest(&tree, &keys));
+    out
+}
+
+/// The fit's short searches between rounds ([`crate::fit::kept_nearest`]): the two nearest
+/// within each query's nearest distance plus `SECOND_REACH`, by the k-d tree and by the
+/// cell grid (cells twice the points' mean spacing on the sphere), with the grid's answers
+/// checked against the tree's.
+fn bounded_two_nearest(tree: &crate::geometry::nearest::NearestTree, keys: &[[f32; 3]]) -> String {
+    use crate::fit::kept_nearest::SECOND_REACH;
+    use crate::geometry::cell_grid::{CellGrid, TwoNearest};
+    let radii: Vec<f64> = keys
+        .iter()
+        .map(|q| tree.nearest_key(q).map_or(0.0, |n| n.1.sqrt()) + SECOND_REACH)
+        .collect();
+    let points = tree.keys();
+    let spacing = (4.0 * std::f64::consts::PI * 0.25 / points.len() as f64).sqrt();
+    let t = Instant::now();
+    let grid = CellGrid::new(points, 2.0 * spacing);
+    let grid_build = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let by_tree: Vec<Option<(usize, f64, f64)>> = keys
+        .iter()
+        .zip(&radii)
+        .map(|(q, &r)| tree.nearest_two_within(q, r))
+        .collect();
+    let tree_time = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let by_grid: Vec<TwoNearest> = keys
+        .iter()
+        .zip(&radii)
+        .map(|(q, &r)| grid.nearest_two_within(q, r))
+        .collect();
+    let grid_time = t.elapsed().as_secs_f64();
+    let (mut unsure, mut differ) = (0, 0);
+    for (g, t) in by_grid.iter().zip(&by_tree) {
+        match g {
+            TwoNearest::Found(i, d2, s2) => differ += usize::from(Some((*i, *d2, *s2)) != *t),
+            TwoNearest::None => differ += usize::from(t.is_some()),
+            TwoNearest::Unsure => unsure += 1,
+        }
+    }
+    let n = keys.len() as f64;
+    format!(
+        "bounded two nearest (within the nearest's distance + {:.0} mm, as the fit's searches), 1 thread:\n  k-d tree: {:.2} M queries/s\n  cell grid ({:.1} mm cells, built in {:.1} ms): {:.2} M queries/s, {unsure} deferred to the tree, {differ} answers differing from the tree's\n",
+        SECOND_REACH * 1e3,
+        n / tree_time / 1e6,
+        2e3 * spacing,
+        grid_build * 1e3,
+        n / grid_time / 1e6,
     )
 }
 
