@@ -10,6 +10,10 @@
 //! so the answer is reused without a search. With a margin for the f32 coordinates the
 //! tree measures in, the reused answer is the one a fresh search would give: same point,
 //! same squared distance ([`key_distance2`] is the tree's own arithmetic).
+//!
+//! A fresh search is bounded by the old partner's current distance, so it is short: it goes
+//! through a [`CellGrid`], which gives the k-d tree's answer and defers to the tree where
+//! two points tie or the ball is wide.
 
 use crate::geometry::cell_grid::{CellGrid, TwoNearest};
 use crate::geometry::nearest::{key_distance2, NearestTree};
@@ -56,9 +60,9 @@ fn key_distance(a: &[f32; 3], b: &[f32; 3]) -> f64 {
 /// Where fresh answers come from: a [`CellGrid`] over the points for the short bounded
 /// searches, and the k-d tree over the same points (built only when first asked for) for
 /// the first, unbounded search and for the grid's [`TwoNearest::Unsure`] answers.
-pub struct Searcher<'a> {
-    pub grid: &'a CellGrid,
-    pub tree: &'a (dyn Fn() -> &'a NearestTree + Sync),
+struct Searcher<'a> {
+    grid: &'a CellGrid,
+    tree: &'a (dyn Fn() -> &'a NearestTree + Sync),
 }
 
 /// A fresh search. `bound` is the current distance of the point that was nearest before,
