@@ -18,7 +18,7 @@
 //! vertices' lists are built again.
 
 use crate::geometry::mesh::point_bounds;
-use crate::geometry::nearest::{key, NearestTree};
+use crate::geometry::nearest::{key, key_distance2_f32, NearestTree};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::skinning::joint_neighbours;
 use nalgebra::Vector3;
@@ -110,14 +110,11 @@ fn box_gap(q: &Vector3<f64>, (lo, hi): &(Vector3<f64>, Vector3<f64>)) -> f64 {
 /// order, so among equally near vertices the lowest index wins, whatever order the lists
 /// were found in.
 fn nearest_listed(listed: &[u32], keys: &[[f32; 3]], v: usize) -> (f64, usize) {
-    // In f32 with the axes summed in order: `key_distance2`'s arithmetic (its f64 result
-    // is this sum widened, which orders the same), without the widening in the loop.
-    let q = keys[v];
+    // Compared in f32, before `key_distance2` widens them (which orders the same).
+    let q = &keys[v];
     let (mut best2, mut best) = (f32::INFINITY, u32::MAX);
     for &w in listed {
-        let p = keys[w as usize];
-        let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
-        let d2 = dx * dx + dy * dy + dz * dz;
+        let d2 = key_distance2_f32(q, &keys[w as usize]);
         if d2 < best2 {
             (best2, best) = (d2, w);
         }

@@ -105,8 +105,8 @@ impl CellGrid {
         }
         self.order.clear();
         self.order.resize(keys.len(), 0);
-        // Each cell's next free slot: its start, moved along as points are placed (the
-        // starts are restored from the order's cells afterwards).
+        // Each cell's next free slot: its start, moved along as points are placed (then
+        // shifted back by one cell below).
         for (i, &c) in self.cells.iter().enumerate() {
             let slot = &mut self.starts[c as usize];
             self.order[*slot as usize] = i as u32;
@@ -138,8 +138,8 @@ impl CellGrid {
     pub fn nearest_two_within(&self, q: &[f32; 3], radius: f64) -> TwoNearest {
         let r2 = (radius * radius) as f32 as f64;
         // Every point within the radius lies in these cells (a little slack for rounding;
-        // points outside the box were clamped into its border cells, which are included
-        // whenever the ball reaches past the border).
+        // every point lies in the box, so clamping the range to the grid loses none, and a
+        // ball wholly outside the box finds none).
         let reach = radius * (1.0 + 1e-5) + 1e-6;
         let mut range = [(0usize, 0usize); 3];
         for (a, r) in range.iter_mut().enumerate() {

@@ -20,12 +20,18 @@ pub fn key(p: &Vector3<f64>) -> [f32; 3] {
 
 /// [`tree_distance2`] between points already turned to [`key`]s, m^2.
 pub fn key_distance2(a: &[f32; 3], b: &[f32; 3]) -> f64 {
+    key_distance2_f32(a, b) as f64
+}
+
+/// [`key_distance2`] before widening to f64 (the same order of points: for scans that
+/// compare many distances), m^2.
+pub fn key_distance2_f32(a: &[f32; 3], b: &[f32; 3]) -> f32 {
     let mut sum = 0.0f32;
     for axis in 0..3 {
         let d = a[axis] - b[axis];
         sum += d * d;
     }
-    sum as f64
+    sum
 }
 
 /// The squared distance between `a` and `b` exactly as the tree measures it (f32
