@@ -255,7 +255,8 @@ enum BenchWhat {
         #[arg(long)]
         joints: Option<PathBuf>,
     },
-    /// k-d tree nearest-neighbour queries per second (compare tools/bench_fit.py).
+    /// k-d tree nearest-neighbour queries per second (compare tools/bench_fit.py), and the
+    /// fit's bounded two-nearest search by the k-d tree and by the cell grid side by side
     Nearest {
         #[arg(long, default_value_t = 100_000)]
         points: usize,
