@@ -148,15 +148,14 @@ impl<'a> HeldProblem<'a> {
                 chunk.iter().fold(zero(), |mut acc, &pull| {
                     let (v, w, c) = self.targets.pulls[pull as usize];
                     let v = v as usize;
-                    let y = pose_vertex(&bones, &self.rest[v], &self.weights[v]);
-                    let r = y - c;
-                    acc.e += w * r.norm_squared();
-                    sparse_vertex_jacobian(
+                    let y = sparse_vertex_jacobian(
                         &bones,
                         &self.rest[v],
                         &self.weights[v],
                         &mut acc.blocks,
                     );
+                    let r = y - c;
+                    acc.e += w * r.norm_squared();
                     // Columns: the translation's identity, then each block's three.
                     acc.cols.clear();
                     for k in 0..3 {
@@ -170,12 +169,25 @@ impl<'a> HeldProblem<'a> {
                     // Below 1, ci^T M cj = t ci.cj + (1 - t)(n.ci)(n.cj); at 1, M = I.
                     let t = tangential;
                     acc.along.clear();
+                    let mut first = 0;
                     if t < 1.0 {
                         let normal = self.targets.normals[pull as usize];
                         acc.along
                             .extend(acc.cols.iter().map(|(_, col)| normal.dot(col)));
+                    } else {
+                        // At 1 a translation column's dot product with a column is that
+                        // column's entry (the other two products are zeros, exactly), so
+                        // its row is filled without them: the same sums, bit for bit.
+                        for k in 0..3 {
+                            acc.g[k] += w * r[k];
+                            acc.h[k * n + k] += w;
+                            for (pj, cj) in &acc.cols[3..] {
+                                acc.h[k * n + pj] += w * cj[k];
+                            }
+                        }
+                        first = 3;
                     }
-                    for (i, (pi, ci)) in acc.cols.iter().enumerate() {
+                    for (i, (pi, ci)) in acc.cols.iter().enumerate().skip(first) {
                         acc.g[*pi] += w * ci.dot(&r);
                         for (j, (pj, cj)) in acc.cols.iter().enumerate().skip(i) {
                             let mut m = ci.dot(cj);

@@ -130,16 +130,20 @@ pub fn pose_vertex(bones: &PosedBones, v: &Vector3<f64>, w: &Influences) -> Vect
 /// The Jacobian of the posed t0 vertex `v` with respect to the pose increments, keeping
 /// only what is not zero: the translation block is the identity (the weights sum to 1), and
 /// `blocks` is overwritten with (bone, its three columns) for every bone on the chains of
-/// `v`'s influences (see [`PosedBones::add_point_jacobian`]).
+/// `v`'s influences (see [`PosedBones::add_point_jacobian`]). Returns the posed vertex,
+/// the same value as [`pose_vertex`] (the same operations in the same order), so that a
+/// caller needing both transforms each influence once.
 pub fn sparse_vertex_jacobian(
     bones: &PosedBones,
     v: &Vector3<f64>,
     w: &Influences,
     blocks: &mut Vec<(usize, [Vector3<f64>; 3])>,
-) {
+) -> Vector3<f64> {
     blocks.clear();
+    let mut posed = Vector3::zeros();
     for &(b, wb) in w {
         let y = bones.transform(b, v);
+        posed += wb * y;
         for &a in &bones.chains[b] {
             let at = match blocks.iter().position(|x| x.0 == a) {
                 Some(i) => i,
@@ -155,6 +159,7 @@ pub fn sparse_vertex_jacobian(
             }
         }
     }
+    posed
 }
 
 /// The Jacobian of the posed t0 vertex `v` with respect to the pose increments: `columns`
