@@ -971,36 +971,84 @@ impl<'a> Fitter<'a> {
         };
         self.time("pairs, weights", || {
             let n = posed.len();
-            let mut w_sum = vec![0.0; n];
-            let mut target = vec![Vector3::zeros(); n];
+            // Each pair's weight and weight without rho_c, in parallel (0 for a pair
+            // without a partner).
+            let weigh = |v: usize, u: usize, d2: f64| {
+                if d2.is_finite() {
+                    (weight(v, u), score_weight(v, u))
+                } else {
+                    (0.0, 0.0)
+                }
+            };
+            let forward_weights: Vec<(f64, f64)> = forward
+                .par_iter()
+                .enumerate()
+                .map(|(v, &(u, d2))| weigh(v, u, d2))
+                .collect();
+            let backward_weights: Vec<(f64, f64)> = backward
+                .par_iter()
+                .enumerate()
+                .map(|(u, &(v, d2))| weigh(v, u, d2))
+                .collect();
+            // The sums over all pairs, serially in the pairs' order (forward, then
+            // backward): the same bits on every run.
             let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
             let mut scored_sq = 0.0;
-            let mut add = |v: usize, u: usize, d2: f64| {
-                let w = if d2.is_finite() { weight(v, u) } else { 0.0 };
+            let pairs = forward
+                .iter()
+                .zip(&forward_weights)
+                .chain(backward.iter().zip(&backward_weights));
+            for (&(_, d2), &(w, ws)) in pairs {
                 if w < 0.5 {
                     downweighted += 1;
                 }
                 if w > 0.0 && d2.is_finite() {
-                    w_sum[v] += w;
-                    target[v] += w * obs.vertices[u];
                     weighted_sq += w * d2;
                     weight_sum += w;
                 }
-                let ws = if d2.is_finite() {
-                    score_weight(v, u)
-                } else {
-                    0.0
-                };
                 if ws > 0.0 {
                     scored_sq += ws * d2;
                 }
-            };
-            for (v, &(u, d2)) in forward.iter().enumerate() {
-                add(v, u, d2);
             }
-            for (u, &(v, d2)) in backward.iter().enumerate() {
-                add(v, u, d2);
+            // Each model vertex's pulls: its own pair, then the observed vertices whose
+            // nearest it is, in their order (a counting sort), summed vertex by vertex in
+            // parallel; each vertex's sum runs in the same order as one pass over the pairs.
+            let pulls_on = |w: f64, d2: f64| w > 0.0 && d2.is_finite();
+            let mut starts = vec![0u32; n + 1];
+            for (&(v, d2), &(w, _)) in backward.iter().zip(&backward_weights) {
+                if pulls_on(w, d2) {
+                    starts[v + 1] += 1;
+                }
             }
+            for v in 0..n {
+                starts[v + 1] += starts[v];
+            }
+            let mut next = starts.clone();
+            let mut pullers = vec![0u32; starts[n] as usize];
+            for (u, (&(v, d2), &(w, _))) in backward.iter().zip(&backward_weights).enumerate() {
+                if pulls_on(w, d2) {
+                    pullers[next[v] as usize] = u as u32;
+                    next[v] += 1;
+                }
+            }
+            let (w_sum, target): (Vec<f64>, Vec<Vector3<f64>>) = (0..n)
+                .into_par_iter()
+                .map(|v| {
+                    let (mut total, mut sum) = (0.0, Vector3::zeros());
+                    let (u, d2) = forward[v];
+                    let (w, _) = forward_weights[v];
+                    if pulls_on(w, d2) {
+                        total += w;
+                        sum += w * obs.vertices[u];
+                    }
+                    for &u in &pullers[starts[v] as usize..starts[v + 1] as usize] {
+                        let w = backward_weights[u as usize].0;
+                        total += w;
+                        sum += w * obs.vertices[u as usize];
+                    }
+                    (total, sum)
+                })
+                .unzip();
             let pulled: Vec<usize> = (0..n).filter(|&v| w_sum[v] > 0.0).collect();
             let pulls = pulled
                 .iter()
