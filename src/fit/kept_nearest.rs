@@ -361,6 +361,25 @@ mod tests {
         }
     }
 
+    /// 30 rounds of `queries` walking against `tree`'s points (mostly slow steps, now and
+    /// then a jump), every answer checked against a fresh search.
+    fn track_queries(
+        queries: &mut [[f32; 3]],
+        rnd: &mut impl FnMut() -> f64,
+        tree: &NearestTree,
+        grid: &CellGrid,
+    ) -> MovingQueries {
+        let mut kept = MovingQueries::default();
+        for round in 0..30 {
+            let got = kept.partners(queries, tree, grid);
+            for (q, g) in queries.iter().zip(&got) {
+                assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
+            }
+            walk(queries, rnd, if round % 7 == 6 { 0.004 } else { 0.0003 });
+        }
+        kept
+    }
+
     #[test]
     fn moving_queries_agree_with_fresh_searches() {
         let (fixed, _) = lattice(3, 2000);
@@ -368,19 +387,7 @@ mod tests {
         let grid = CellGrid::new(&fixed, 0.01);
         let (mut queries, mut rnd) = lattice(5, 1500);
         walk(&mut queries, &mut rnd, 0.002);
-        let mut kept = MovingQueries::default();
-        for round in 0..30 {
-            let got = kept.partners(&queries, &tree, &grid);
-            for (q, g) in queries.iter().zip(&got) {
-                assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
-            }
-            // Mostly slow steps, now and then a jump.
-            walk(
-                &mut queries,
-                &mut rnd,
-                if round % 7 == 6 { 0.004 } else { 0.0003 },
-            );
-        }
+        let kept = track_queries(&mut queries, &mut rnd, &tree, &grid);
         assert!(kept.reused > 30 * 1500 / 2, "reused {}", kept.reused);
     }
 
@@ -403,18 +410,7 @@ mod tests {
         for q in &mut queries {
             q[2] = 1.01 + (q[2] - 1.0) * 0.55;
         }
-        let mut kept = MovingQueries::default();
-        for round in 0..30 {
-            let got = kept.partners(&queries, &tree, &grid);
-            for (q, g) in queries.iter().zip(&got) {
-                assert_eq!(Some(*g), tree.nearest_key(q), "round {round}");
-            }
-            walk(
-                &mut queries,
-                &mut rnd,
-                if round % 7 == 6 { 0.004 } else { 0.0003 },
-            );
-        }
+        let kept = track_queries(&mut queries, &mut rnd, &tree, &grid);
         let listed = kept.listed.iter().filter(|l| l.is_some()).count();
         assert!(listed > 700, "{listed} listed");
         assert!(kept.reused > 30 * 800 / 2, "reused {}", kept.reused);
