@@ -209,7 +209,7 @@ impl MovingQueries {
             .zip(self.listed.par_iter_mut())
             .zip(queries)
             .map(|((kept, listed), q)| {
-                let mut bound = f64::INFINITY;
+                let (mut bound, mut slow) = (f64::INFINITY, false);
                 if let Some(k) = kept {
                     let d2 = key_distance2(q, tree.key(k.item as usize));
                     let moved = key_distance(q, &k.when);
@@ -217,6 +217,7 @@ impl MovingQueries {
                         return (k.item as usize, d2, true);
                     }
                     bound = d2.sqrt();
+                    slow = moved < 0.5 * LIST_SLACK;
                 }
                 if let Some((item, d2, second)) = listed.as_ref().and_then(|l| l.nearest(q, tree)) {
                     *kept = Some(Kept {
@@ -229,7 +230,9 @@ impl MovingQueries {
                 let (fresh, (item, d2)) = search(&from, q, bound, *q);
                 *kept = fresh;
                 let far = d2.sqrt();
-                *listed = (far.is_finite() && far > LIST_FROM)
+                // Listed only once the query moves slowly enough for a list to serve (the
+                // first rounds from a frame's start move too far).
+                *listed = (slow && far.is_finite() && far > LIST_FROM)
                     .then(|| Listed::new(tree, q, far + LIST_SLACK));
                 (item, d2, false)
             })
