@@ -17,8 +17,9 @@
 //!
 //! A moving query far from the fixed points (a model vertex where the observation is
 //! missing) has many points nearly as near as its nearest, so the rule above seldom holds.
-//! Its fresh search also lists every point within a few millimetres beyond the nearest
-//! ([`Listed`]); while the query stays near, a scan of that list gives the exact answer.
+//! Once it moves slowly, its fresh search also lists every point within a few millimetres
+//! beyond the nearest ([`Listed`]); while the query stays near, a scan of that list gives
+//! the exact answer.
 
 use crate::geometry::cell_grid::{CellGrid, TwoNearest};
 use crate::geometry::nearest::{key_distance2, key_distance2_f32, NearestTree};
