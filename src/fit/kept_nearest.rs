@@ -22,7 +22,7 @@
 //! the exact answer.
 
 use crate::geometry::cell_grid::{CellGrid, TwoNearest};
-use crate::geometry::nearest::{key_distance2, key_distance2_f32, NearestTree};
+use crate::geometry::nearest::{key_distance2, NearestTree, TwoSmallest};
 use rayon::prelude::*;
 use std::sync::OnceLock;
 
@@ -62,8 +62,7 @@ impl Listed {
         let mut points = Vec::new();
         // The tree's radius test is on f32 squared distances: a little slack keeps every
         // point within `radius` (metres, exactly) in the list.
-        let centre = nalgebra::Vector3::new(q[0] as f64, q[1] as f64, q[2] as f64);
-        tree.within(&centre, radius * (1.0 + 1e-5) + 1e-6, |i, _| {
+        tree.within_key(q, radius * (1.0 + 1e-5) + 1e-6, |i, _| {
             points.push(i as u32)
         });
         Listed {
@@ -79,23 +78,21 @@ impl Listed {
     /// too far from where it was listed, or the two nearest listed points tie (the tree's
     /// pick then depends on its layout).
     fn nearest(&self, q: &[f32; 3], tree: &NearestTree) -> Option<(usize, f64, f64)> {
-        let (mut best, mut best2, mut second2) = (u32::MAX, f32::INFINITY, f32::INFINITY);
+        let mut two = TwoSmallest::new();
         for &i in &self.points {
-            let d2 = key_distance2_f32(q, tree.key(i as usize));
-            if d2 < best2 {
-                second2 = best2;
-                (best, best2) = (i, d2);
-            } else if d2 < second2 {
-                second2 = d2;
-            }
+            two.offer(i as usize, key_distance2(q, tree.key(i as usize)));
         }
         // Every point not listed lies farther than this from q (triangle inequality).
         let unlisted = self.radius - key_distance(q, &self.at);
-        let (best2, second2) = (best2 as f64, second2 as f64);
-        if best == u32::MAX || best2 == second2 || best2.sqrt() + margin(q) >= unlisted {
+        let TwoSmallest {
+            item,
+            best2,
+            second2,
+        } = two;
+        if item == usize::MAX || best2 == second2 || best2.sqrt() + margin(q) >= unlisted {
             return None;
         }
-        Some((best as usize, best2, second2.sqrt().min(unlisted)))
+        Some((item, best2, second2.sqrt().min(unlisted)))
     }
 }
 
@@ -343,11 +340,7 @@ mod tests {
     /// steps: each round's kept answers equal a fresh search's, point for point, and most
     /// are reused.
     fn lattice(seed: u64, count: usize) -> (Vec<[f32; 3]>, impl FnMut() -> f64) {
-        let mut s = seed;
-        let mut rnd = move || {
-            s = crate::synth::rng::mix64(s);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::synth::rng::chained_uniform(seed);
         let points = (0..count)
             .map(|_| {
                 let mut c = || (rnd() * 20.0).floor() * 0.01 + 1.0;

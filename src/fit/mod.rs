@@ -990,6 +990,8 @@ impl<'a> Fitter<'a> {
                 .enumerate()
                 .map(|(u, &(v, d2))| weigh(v, u, d2))
                 .collect();
+            // Whether a pair pulls its model vertex.
+            let pulls_on = |w: f64, d2: f64| w > 0.0 && d2.is_finite();
             // The sums over all pairs, serially in the pairs' order (forward, then
             // backward): the same bits on every run.
             let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
@@ -1002,7 +1004,7 @@ impl<'a> Fitter<'a> {
                 if w < 0.5 {
                     downweighted += 1;
                 }
-                if w > 0.0 && d2.is_finite() {
+                if pulls_on(w, d2) {
                     weighted_sq += w * d2;
                     weight_sum += w;
                 }
@@ -1013,7 +1015,6 @@ impl<'a> Fitter<'a> {
             // Each model vertex's pulls: its own pair, then the observed vertices whose
             // nearest it is, in their order (a counting sort), summed vertex by vertex in
             // parallel; each vertex's sum runs in the same order as one pass over the pairs.
-            let pulls_on = |w: f64, d2: f64| w > 0.0 && d2.is_finite();
             let mut starts = vec![0u32; n + 1];
             for (&(v, d2), &(w, _)) in backward.iter().zip(&backward_weights) {
                 if pulls_on(w, d2) {

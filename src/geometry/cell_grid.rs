@@ -12,7 +12,7 @@
 //! depends on its layout: such a query answers [`TwoNearest::Unsure`] and the caller asks
 //! the tree.
 
-use crate::geometry::nearest::key_distance2;
+use crate::geometry::nearest::{key_distance2, TwoSmallest};
 
 /// At most this many cells per point (and at least [`MIN_CELLS`] in all); a larger box gets
 /// larger cells. The cell array is cleared and summed on every rebuild, so its size, not
@@ -155,7 +155,7 @@ impl CellGrid {
         if visited > MAX_VISITED {
             return TwoNearest::Unsure;
         }
-        let (mut best, mut best2, mut second2) = (usize::MAX, f64::INFINITY, f64::INFINITY);
+        let mut two = TwoSmallest::new();
         for z in range[2].0..=range[2].1 {
             for y in range[1].0..=range[1].1 {
                 let row = (z * self.dims[1] + y) * self.dims[0];
@@ -163,25 +163,23 @@ impl CellGrid {
                 let to = self.starts[row + range[0].1 + 1] as usize;
                 for (i, p) in self.sorted[from..to].iter().enumerate() {
                     let d2 = key_distance2(q, p);
-                    if d2 > r2 {
-                        continue;
-                    }
-                    if d2 < best2 {
-                        second2 = best2;
-                        (best, best2) = (from + i, d2);
-                    } else if d2 < second2 {
-                        second2 = d2;
+                    if d2 <= r2 {
+                        two.offer(from + i, d2);
                     }
                 }
             }
         }
-        if best == usize::MAX {
+        if two.item == usize::MAX {
             TwoNearest::None
-        } else if second2 == best2 {
+        } else if two.second2 == two.best2 {
             TwoNearest::Unsure
         } else {
-            let second = if second2.is_finite() { second2 } else { r2 };
-            TwoNearest::Found(self.order[best] as usize, best2, second)
+            let second = if two.second2.is_finite() {
+                two.second2
+            } else {
+                r2
+            };
+            TwoNearest::Found(self.order[two.item] as usize, two.best2, second)
         }
     }
 }
@@ -196,11 +194,7 @@ mod tests {
     /// from a millimetre to beyond the grid, with queries inside and outside the box.
     #[test]
     fn agrees_with_the_tree() {
-        let mut s = 5u64;
-        let mut rnd = move || {
-            s = crate::synth::rng::mix64(s);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::synth::rng::chained_uniform(5);
         let mut unsure = 0;
         for lattice in [false, true] {
             let keys: Vec<[f32; 3]> = (0..3000)

@@ -138,13 +138,55 @@ impl NearestTree {
 
     /// Calls `visit(index, squared distance)` for every point within `radius` metres of `q`,
     /// in no particular order.
-    pub fn within(&self, q: &Vector3<f64>, radius: f64, mut visit: impl FnMut(usize, f64)) {
+    pub fn within(&self, q: &Vector3<f64>, radius: f64, visit: impl FnMut(usize, f64)) {
+        self.within_key(&key(q), radius, visit)
+    }
+
+    /// [`NearestTree::within`] for a query already turned to a [`key`].
+    pub fn within_key(&self, q: &[f32; 3], radius: f64, mut visit: impl FnMut(usize, f64)) {
         if let Some(tree) = &self.tree {
-            tree.query(&key(q))
+            tree.query(q)
                 .within::<SquaredEuclidean<f32>>((radius * radius) as f32)
                 .unsorted()
                 .visit(|r| visit(r.item as usize, r.distance as f64));
         }
+    }
+}
+
+/// The nearest and second-nearest of the squared distances offered one by one to
+/// [`TwoSmallest::offer`]: a distance replaces the nearest only when strictly smaller, so
+/// of equal ones the first offered stays, and `second2 == best2` tells a tie.
+#[derive(Debug, Clone, Copy)]
+pub struct TwoSmallest {
+    /// The nearest's item (`usize::MAX` while none was offered).
+    pub item: usize,
+    /// Squared distances, m^2 (infinite while fewer were offered).
+    pub best2: f64,
+    pub second2: f64,
+}
+
+impl TwoSmallest {
+    pub fn new() -> TwoSmallest {
+        TwoSmallest {
+            item: usize::MAX,
+            best2: f64::INFINITY,
+            second2: f64::INFINITY,
+        }
+    }
+
+    pub fn offer(&mut self, item: usize, d2: f64) {
+        if d2 < self.best2 {
+            self.second2 = self.best2;
+            (self.item, self.best2) = (item, d2);
+        } else if d2 < self.second2 {
+            self.second2 = d2;
+        }
+    }
+}
+
+impl Default for TwoSmallest {
+    fn default() -> Self {
+        TwoSmallest::new()
     }
 }
 
@@ -156,11 +198,8 @@ mod tests {
     /// marching-cubes vertices do).
     #[test]
     fn agrees_with_brute_force() {
-        let mut s = 7u64;
-        let mut rnd = move || {
-            s = crate::synth::rng::mix64(s);
-            ((s >> 11) as f64 / (1u64 << 53) as f64 * 20.0).floor() * 0.01
-        };
+        let mut uniform = crate::synth::rng::chained_uniform(7);
+        let mut rnd = move || (uniform() * 20.0).floor() * 0.01;
         let points: Vec<Vector3<f64>> = (0..3000)
             .map(|_| Vector3::new(rnd(), rnd(), rnd()))
             .collect();

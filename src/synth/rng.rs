@@ -13,6 +13,15 @@ pub fn mix64(k: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// Uniform numbers in [0, 1) from iterating [`mix64`] on `seed` (the tests' streams).
+pub fn chained_uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state = mix64(state);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 impl Rng {
     /// A stream determined by `seed` and a stream label (e.g. camera and frame).
     pub fn new(seed: u64, stream: u64) -> Rng {
