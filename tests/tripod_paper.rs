@@ -101,14 +101,10 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     // Tracked from t0 up to frame `last` (rho_p is only needed up to the contact frames).
     let baseline = |params: hullpose::fit::FitParams, last: u32| {
         let frames: Vec<u32> = tracked.iter().copied().filter(|&f| f <= last).collect();
-        let fits = hullpose::stages::fit::track(&ctx, &frames, &params, &|_| {})
-            .unwrap()
-            .results;
-        let rows: Vec<_> = fits
-            .iter()
-            .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
-            .collect();
-        errors_cm(d, &rows)
+        errors_cm(
+            d,
+            &tracked_joint_rows(&ctx, &model.skeleton, &frames, &params),
+        )
     };
     // The fit stage (method `proposed`, every frame) and the four baselines side by side:
     // each round's serial parts (LM steps, trees) of one overlap with the others' parallel

@@ -346,3 +346,19 @@ pub fn copy_tree(from: &Path, to: &Path) {
         }
     }
 }
+
+/// Tracks `frames` with `params` over the cached reconstruction of `ctx`'s run (as the fit
+/// stage does) and returns the joints of every frame's pose.
+pub fn tracked_joint_rows(
+    ctx: &hullpose::stages::Context,
+    skeleton: &hullpose::skeleton::Skeleton,
+    frames: &[u32],
+    params: &hullpose::fit::FitParams,
+) -> Vec<hullpose::joints::JointRow> {
+    hullpose::stages::fit::track(ctx, frames, params, &|_| {})
+        .unwrap()
+        .results
+        .iter()
+        .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(skeleton, *f, &r.pose))
+        .collect()
+}
