@@ -398,11 +398,7 @@ mod tests {
                 tail: corners[k + 1],
             })
             .collect();
-        let mut s = 11u64;
-        let mut rnd = move || {
-            s = crate::synth::rng::mix64(s);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::synth::rng::chained_uniform(11);
         let (mut vertices, mut labels) = (Vec::new(), Vec::new());
         for (k, b) in bones.iter().enumerate() {
             for _ in 0..1500 {

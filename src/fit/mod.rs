@@ -994,8 +994,8 @@ impl<'a> Fitter<'a> {
                 .enumerate()
                 .map(|(u, &(v, d2))| weigh(v, u, d2))
                 .collect();
-            // Whether a pair pulls its model vertex.
-            let pulls_on = |w: f64, d2: f64| w > 0.0 && d2.is_finite();
+            // Whether a pair pulls its model vertex (a pair without a partner weighs 0).
+            let pulls_on = |w: f64| w > 0.0;
             // The sums over all pairs, serially in the pairs' order (forward, then
             // backward): the same bits on every run.
             let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
@@ -1008,7 +1008,7 @@ impl<'a> Fitter<'a> {
                 if w < 0.5 {
                     downweighted += 1;
                 }
-                if pulls_on(w, d2) {
+                if pulls_on(w) {
                     weighted_sq += w * d2;
                     weight_sum += w;
                 }
@@ -1020,8 +1020,8 @@ impl<'a> Fitter<'a> {
             // nearest it is, in their order (a counting sort), summed vertex by vertex in
             // parallel; each vertex's sum runs in the same order as one pass over the pairs.
             let mut starts = vec![0u32; n + 1];
-            for (&(v, d2), &(w, _)) in backward.iter().zip(&backward_weights) {
-                if pulls_on(w, d2) {
+            for (&(v, _), &(w, _)) in backward.iter().zip(&backward_weights) {
+                if pulls_on(w) {
                     starts[v + 1] += 1;
                 }
             }
@@ -1030,8 +1030,8 @@ impl<'a> Fitter<'a> {
             }
             let mut next = starts.clone();
             let mut pullers = vec![0u32; starts[n] as usize];
-            for (u, (&(v, d2), &(w, _))) in backward.iter().zip(&backward_weights).enumerate() {
-                if pulls_on(w, d2) {
+            for (u, (&(v, _), &(w, _))) in backward.iter().zip(&backward_weights).enumerate() {
+                if pulls_on(w) {
                     pullers[next[v] as usize] = u as u32;
                     next[v] += 1;
                 }
@@ -1040,9 +1040,9 @@ impl<'a> Fitter<'a> {
                 .into_par_iter()
                 .map(|v| {
                     let (mut total, mut sum) = (0.0, Vector3::zeros());
-                    let (u, d2) = forward[v];
+                    let (u, _) = forward[v];
                     let (w, _) = forward_weights[v];
-                    if pulls_on(w, d2) {
+                    if pulls_on(w) {
                         total += w;
                         sum += w * obs.vertices[u];
                     }

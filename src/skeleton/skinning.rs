@@ -185,11 +185,8 @@ pub(crate) mod tests {
 
     /// Repeatable numbers uniform in [-1, 1) for tests, from `seed`.
     pub(crate) fn signed_uniform(seed: u64) -> impl FnMut() -> f64 {
-        let mut state = seed;
-        move || {
-            state = crate::synth::rng::mix64(state);
-            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        }
+        let mut uniform = crate::synth::rng::chained_uniform(seed);
+        move || uniform() * 2.0 - 1.0
     }
 
     /// A small branching skeleton (root, a two-bone arm and a one-bone arm) for tests.
