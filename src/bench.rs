@@ -397,8 +397,14 @@ fn bounded_two_nearest(tree: &crate::geometry::nearest::NearestTree, keys: &[[f3
 /// The fit stage's tracking over the job's frames, in memory, with `method` overriding
 /// fit.method: seconds, rounds, joint error, residual and status per frame, then
 /// milliseconds per round of each step and the mean seconds per tracked frame; with
-/// `joints`, the tracked joints are written there (joints.csv).
-pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) -> Result<String> {
+/// `joints`, the tracked joints are written there (joints.csv), with `rounds` every round
+/// ([`rounds_csv`]).
+pub fn track(
+    job: &Job,
+    method: Option<&str>,
+    joints: Option<&std::path::Path>,
+    rounds: Option<&std::path::Path>,
+) -> Result<String> {
     let ctx = job.context();
     let mut params = job.config.fit.clone();
     if let Some(name) = method {
@@ -431,13 +437,17 @@ pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) 
         crate::joints::write(path, &rows)?;
     }
     // With ground truth, each frame's mean joint error (cm).
-    let errors: Vec<(u32, f64)> = match job.sequence.ground_truth_joints()? {
-        Some(truth) => {
-            let path = job.sequence.dir.join("ground_truth/joints.csv");
-            crate::eval::pose::joint_errors(&truth, &rows, &path)?
-        }
+    let truth = job.sequence.ground_truth_joints()?;
+    let truth_path = job.sequence.dir.join("ground_truth/joints.csv");
+    let errors: Vec<(u32, f64)> = match &truth {
+        Some(truth) => crate::eval::pose::joint_errors(truth, &rows, &truth_path)?,
         None => Vec::new(),
     };
+    if let Some(path) = rounds {
+        let truth = truth.as_deref().map(|t| (t, truth_path.as_path()));
+        let text = rounds_csv(&model.skeleton, &tracked.rounds, truth)?;
+        crate::fsutil::write_atomic(path, text.as_bytes())?;
+    }
     let mut out = format!(
         "tracking, method {}, model_spacing {} m, sample_spacing {} m\n  frame  seconds  rounds  error_cm     rms_mm  status\n",
         params.method.name(),
@@ -480,6 +490,43 @@ pub fn track(job: &Job, method: Option<&str>, joints: Option<&std::path::Path>) 
         "  {fitted} tracked frames in {seconds:.2} s: {:.3} s per frame",
         seconds / fitted.max(1) as f64
     );
+    Ok(out)
+}
+
+/// Header of [`rounds_csv`].
+pub const ROUNDS_HEADER: &str = "frame,start,round,kind,moved_mm,energy,error_cm";
+
+/// The rounds of a tracking as CSV, a row per round in computation order: the frame, which
+/// of its fits (`start`: 0 the first, 1 and on the restarts), the round's number in that
+/// fit, its kind ([`crate::fit::RoundKind`]), its largest joint motion (mm), eq. 4 after it
+/// (m^2) and, with `truth` (ground-truth joints and their file), the mean joint error of
+/// its pose (cm; empty without).
+pub fn rounds_csv(
+    skeleton: &crate::skeleton::Skeleton,
+    rounds: &[(u32, crate::fit::RoundRecord)],
+    truth: Option<(&[crate::joints::JointRow], &std::path::Path)>,
+) -> Result<String> {
+    let mut out = format!("{ROUNDS_HEADER}\n");
+    for (frame, r) in rounds {
+        let error = match truth {
+            Some((truth, path)) => {
+                let rows = crate::stages::fit::joint_rows(skeleton, *frame, &r.pose);
+                let e = crate::eval::pose::joint_errors(truth, &rows, path)?;
+                e.first()
+                    .map_or(String::new(), |e| format!("{:.4}", e.1 * 100.0))
+            }
+            None => String::new(),
+        };
+        let _ = writeln!(
+            out,
+            "{frame},{},{},{},{:.4},{:.6e},{error}",
+            r.start,
+            r.round,
+            r.kind.name(),
+            r.moved * 1e3,
+            r.energy
+        );
+    }
     Ok(out)
 }
 

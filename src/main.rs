@@ -254,6 +254,11 @@ enum BenchWhat {
         /// Also write the tracked joints here (the joints.csv schema).
         #[arg(long)]
         joints: Option<PathBuf>,
+        /// Also write every round of every frame's fit here (CSV: its largest joint motion,
+        /// eq. 4 and, with ground truth, the mean joint error after it): how much each round
+        /// buys, for tuning fit.tolerance and fit.max_iterations.
+        #[arg(long)]
+        rounds: Option<PathBuf>,
     },
     /// k-d tree nearest-neighbour queries per second (compare tools/bench_fit.py), and the
     /// fit's bounded two-nearest search by the k-d tree and by the cell grid side by side
@@ -494,11 +499,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 file,
                 method,
                 joints,
+                rounds,
             } => {
                 let job = Job::load(Config::load(&file)?, None)?;
                 print!(
                     "{}",
-                    hullpose::bench::track(&job, method.as_deref(), joints.as_deref())?
+                    hullpose::bench::track(
+                        &job,
+                        method.as_deref(),
+                        joints.as_deref(),
+                        rounds.as_deref()
+                    )?
                 );
             }
             BenchWhat::Nearest { points, queries } => {

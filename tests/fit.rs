@@ -1,9 +1,12 @@
 //! Stage 6 on exact observations: with the true surface observed, the fit recovers the
 //! true pose from the previous frame's (with either solver); a frame without observation keeps the previous pose
 //! and is flagged; damaged observations never put NaN into a pose; a lost fit's restarts
-//! never repeat a start.
+//! never repeat a start; the round log records the rounds the fit did.
 
-use hullpose::fit::{FitDiagnostics, FitParams, FitStatus, Fitter, Method, Observation, Solver};
+use hullpose::fit::{
+    FitDiagnostics, FitParams, FitStatus, Fitter, Method, Observation, RoundKind, RoundRecord,
+    Solver,
+};
 use hullpose::skeleton::{pose::joints, Pose, Skeleton};
 use hullpose::synth::{SceneKind, SynthOptions};
 use nalgebra::Vector3;
@@ -49,6 +52,43 @@ fn joint_error(s: &Skeleton, a: &Pose, b: &Pose) -> f64 {
         / (2 * ja.len()) as f64
 }
 
+/// The rounds a fit recorded (`pipeline bench track --rounds`) are the rounds it did: one
+/// per counted round, numbered in order; each kept Anderson extrapolation and each kept
+/// `direct` step lowered eq. 4 below the pose it started from, each rejected step did not;
+/// the last kept pose is the result, and a converged fit's last one moved less than the
+/// tolerance.
+fn check_round_log(log: &[RoundRecord], r: &hullpose::fit::FitResult, solver: Solver) {
+    assert_eq!(log.len(), r.diagnostics.iterations, "{solver:?}");
+    let mut current: Option<f64> = None;
+    for (k, x) in log.iter().enumerate() {
+        assert_eq!((x.start, x.round), (0, k + 1), "{solver:?}");
+        assert!(x.energy.is_finite() && x.energy > 0.0 && x.moved.is_finite());
+        match (solver, x.kind) {
+            (Solver::Alternating, RoundKind::Step) => {}
+            (Solver::Alternating, RoundKind::Extrapolated) => {
+                assert!(x.energy < current.expect("never the first round"));
+            }
+            (Solver::Direct, RoundKind::Step) => {
+                assert!(current.is_none_or(|c| x.energy < c), "{x:?}");
+            }
+            (Solver::Direct, RoundKind::Rejected) => {
+                assert!(current.is_none_or(|c| x.energy >= c), "{x:?}");
+                continue;
+            }
+            (Solver::Direct, RoundKind::Held) => {}
+            (s, k) => panic!("{s:?} recorded a {k:?} round"),
+        }
+        current = Some(x.energy);
+    }
+    let last = log
+        .iter()
+        .rev()
+        .find(|x| x.kind != RoundKind::Rejected)
+        .expect("a kept round");
+    assert_eq!(last.pose, r.pose);
+    assert!(last.moved < FitParams::default().tolerance);
+}
+
 #[test]
 fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let (dir, skeleton, poses) = truth();
@@ -79,10 +119,33 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
             );
             assert!(e < 0.004, "{method:?} {solver:?} t{f}: joint error {e} m");
             assert_eq!(r.diagnostics.status, FitStatus::Converged);
+            check_round_log(&fitter.take_rounds(), &r, solver);
         }
     }
     let fitter = Fitter::new(&model, FitParams::default());
     let previous = poses[4].1.clone();
+    // The round log as CSV: a row per round, its error against the truth as measured here.
+    let r = fitter.fit(&observe(&mesh(dir.path(), 5)), &previous);
+    let log: Vec<(u32, RoundRecord)> = fitter.take_rounds().into_iter().map(|x| (5, x)).collect();
+    let truth_rows = hullpose::stages::fit::joint_rows(&skeleton, 5, &poses[5].1);
+    let csv =
+        hullpose::bench::rounds_csv(&skeleton, &log, Some((&truth_rows, dir.path()))).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], hullpose::bench::ROUNDS_HEADER);
+    assert_eq!(lines.len(), r.diagnostics.iterations + 1);
+    let last_error: f64 = lines
+        .last()
+        .unwrap()
+        .rsplit(',')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let e = joint_error(&skeleton, &r.pose, &poses[5].1) * 100.0;
+    assert!(
+        (last_error - e).abs() < 1e-4,
+        "{last_error} cm logged, {e} cm measured"
+    );
     // No observation (the subject out of view): the previous pose, flagged.
     let r = fitter.fit(&Observation::default(), &previous);
     assert_eq!(r.diagnostics.status, FitStatus::NoObservation);

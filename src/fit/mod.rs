@@ -435,6 +435,51 @@ pub struct Fitter<'a> {
     /// Nearest answers reused from an earlier round and answers given, both ways, over
     /// every fit (for benchmarks).
     nearest_reuse: std::sync::Mutex<[usize; 4]>,
+    /// Every round since the last [`Fitter::take_rounds`], and how many fits (starts) began
+    /// since then.
+    rounds: std::sync::Mutex<(Vec<RoundRecord>, usize)>,
+}
+
+/// What one round of a fit did (`pipeline bench track --rounds`): one record per round the
+/// fit's `iterations` count.
+#[derive(Debug, Clone)]
+pub struct RoundRecord {
+    /// Which fit of the frame the round belongs to: 0 the first, 1 and on the restarts.
+    pub start: usize,
+    /// The round's number within its fit, from 1.
+    pub round: usize,
+    pub kind: RoundKind,
+    /// The largest joint motion from the pose before the round, metres.
+    pub moved: f64,
+    /// Paper eq. 4 at the round's pose with its own pairs (for a rejected step: at the
+    /// candidate).
+    pub energy: f64,
+    /// The pose after the round (for a rejected step: the candidate).
+    pub pose: Pose,
+}
+
+/// How a round moved the pose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RoundKind {
+    /// LM steps on the held pairs (`alternating`), or a kept step (`direct`).
+    Step,
+    /// `alternating`: the Anderson extrapolation was kept instead of the step.
+    Extrapolated,
+    /// `direct`: the step did not lower eq. 4 and the pose stayed.
+    Rejected,
+    /// `direct`: the alternating round at a stall.
+    Held,
+}
+
+impl RoundKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            RoundKind::Step => "step",
+            RoundKind::Extrapolated => "extrapolated",
+            RoundKind::Rejected => "rejected",
+            RoundKind::Held => "held",
+        }
+    }
 }
 
 /// A frame's observation prepared for the rounds ([`Fitter::prepare`]).
@@ -516,7 +561,30 @@ impl<'a> Fitter<'a> {
             contact,
             timings: Default::default(),
             nearest_reuse: Default::default(),
+            rounds: Default::default(),
         }
+    }
+
+    /// The rounds of every fit since the last call, in order (restarts' rounds follow the
+    /// first fit's, numbered by [`RoundRecord::start`]).
+    pub fn take_rounds(&self) -> Vec<RoundRecord> {
+        let mut r = self.rounds.lock().unwrap_or_else(|e| e.into_inner());
+        r.1 = 0;
+        std::mem::take(&mut r.0)
+    }
+
+    /// Records a round of the current fit.
+    fn record(&self, round: usize, kind: RoundKind, moved: f64, energy: f64, pose: &Pose) {
+        let mut r = self.rounds.lock().unwrap_or_else(|e| e.into_inner());
+        let start = r.1.saturating_sub(1);
+        r.0.push(RoundRecord {
+            start,
+            round,
+            kind,
+            moved,
+            energy,
+            pose: pose.clone(),
+        });
     }
 
     /// Seconds spent in each step so far, summed over every fit.
@@ -710,6 +778,7 @@ impl<'a> Fitter<'a> {
 
     /// Fits from `start` in at most `cap` rounds.
     fn fit_prepared(&self, prepared: &Prepared, start: &Pose, cap: usize) -> FitResult {
+        self.rounds.lock().unwrap_or_else(|e| e.into_inner()).1 += 1;
         let round = self.round(self.params.method, prepared, start);
         let diagnostics = FitDiagnostics::unfitted(FitStatus::IterationCap, prepared.observed);
         let pose = start.clone();
@@ -744,7 +813,20 @@ impl<'a> Fitter<'a> {
                 diagnostics.iterations += 1;
                 let next = self.round(p.method, prepared, &candidate);
                 let moved = joint_motion(self.model, &pose, &candidate);
-                if candidate.is_finite() && next.energy() < round.energy() {
+                let kept = candidate.is_finite() && next.energy() < round.energy();
+                let kind = if kept {
+                    RoundKind::Step
+                } else {
+                    RoundKind::Rejected
+                };
+                self.record(
+                    diagnostics.iterations,
+                    kind,
+                    moved,
+                    next.energy(),
+                    &candidate,
+                );
+                if kept {
                     diagnostics.lm_steps += 1;
                     lambda = (lambda / 3.0).max(1e-9);
                     pose = candidate;
@@ -778,6 +860,8 @@ impl<'a> Fitter<'a> {
                     let moved = joint_motion(self.model, &pose, &stepped);
                     pose = stepped;
                     round = self.round(p.method, prepared, &pose);
+                    let n = diagnostics.iterations;
+                    self.record(n, RoundKind::Held, moved, round.energy(), &pose);
                     lambda = 1e-3;
                     if moved >= p.tolerance {
                         break;
@@ -821,8 +905,15 @@ impl<'a> Fitter<'a> {
                     }
                 }
             }
+            let kind = if next_round.is_some() {
+                RoundKind::Extrapolated
+            } else {
+                RoundKind::Step
+            };
             let next_round = next_round.unwrap_or_else(|| self.round(p.method, prepared, &next));
             let moved = stall.push(joints_of(self.model, &next));
+            let n = diagnostics.iterations;
+            self.record(n, kind, moved, next_round.energy(), &next);
             pose = next;
             round = next_round;
             if moved < p.tolerance {

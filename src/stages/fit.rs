@@ -111,6 +111,7 @@ pub fn track(
     let mut done: std::collections::HashMap<u32, (Pose, FitDiagnostics)> = Default::default();
     let mut out = Vec::with_capacity(frames.len());
     let mut seconds = Vec::with_capacity(frames.len());
+    let mut rounds = Vec::new();
     for &frame in frames {
         let obs = observation(ctx, frame)?;
         let started = std::time::Instant::now();
@@ -131,6 +132,7 @@ pub fn track(
             fitter.fit_tracked(&obs, start, before, previous_fit)
         };
         seconds.push((frame, started.elapsed().as_secs_f64()));
+        rounds.extend(fitter.take_rounds().into_iter().map(|r| (frame, r)));
         let carried = as_cached(&model.skeleton, frame, &result.pose)?;
         done.insert(frame, (carried, result.diagnostics.clone()));
         out.push((frame, result));
@@ -142,6 +144,7 @@ pub fn track(
         seconds,
         steps: fitter.timings(),
         nearest_reused: fitter.nearest_reused_share(),
+        rounds,
     })
 }
 
@@ -168,6 +171,8 @@ pub struct Tracked {
     /// The shares of nearest-neighbour answers reused from an earlier round, model->observed
     /// and observed->model.
     pub nearest_reused: [f64; 2],
+    /// Every round of every frame's fits, in computation order.
+    pub rounds: Vec<(u32, crate::fit::RoundRecord)>,
 }
 
 pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
