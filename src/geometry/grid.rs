@@ -14,6 +14,16 @@ pub struct GridSpec {
     pub dims: [usize; 3],
 }
 
+/// The six face neighbours' offsets (x, y, z): the positive one of each axis first.
+pub const FACE_OFFSETS: [[i64; 3]; 6] = [
+    [1, 0, 0],
+    [-1, 0, 0],
+    [0, 1, 0],
+    [0, -1, 0],
+    [0, 0, 1],
+    [0, 0, -1],
+];
+
 impl GridSpec {
     /// The grid of `voxel`-sized cells covering the box [lo, hi].
     pub fn covering(lo: Vector3<f64>, hi: Vector3<f64>, voxel: f64) -> GridSpec {
@@ -36,6 +46,21 @@ impl GridSpec {
 
     pub fn index(&self, x: usize, y: usize, z: usize) -> usize {
         x + self.dims[0] * (y + self.dims[1] * z)
+    }
+
+    /// The voxel one step from voxel `i` along `offset` (one of [`FACE_OFFSETS`]), or `None`
+    /// where that lies outside the grid.
+    pub fn face_neighbour(&self, i: usize, offset: [i64; 3]) -> Option<usize> {
+        let c = self.coords(i);
+        let mut at = [0usize; 3];
+        for axis in 0..3 {
+            let v = c[axis] as i64 + offset[axis];
+            if v < 0 || v >= self.dims[axis] as i64 {
+                return None;
+            }
+            at[axis] = v as usize;
+        }
+        Some(self.index(at[0], at[1], at[2]))
     }
 
     pub fn coords(&self, i: usize) -> [usize; 3] {
@@ -84,5 +109,33 @@ impl GridSpec {
             }
         }
         acc as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn face_neighbours_stay_inside_the_grid() {
+        let g = GridSpec {
+            origin: Vector3::zeros(),
+            voxel: 0.01,
+            dims: [3, 4, 5],
+        };
+        // A corner voxel has three neighbours, an inner one six, each one step away.
+        let count = |i: usize| {
+            FACE_OFFSETS
+                .iter()
+                .filter_map(|&o| g.face_neighbour(i, o))
+                .count()
+        };
+        assert_eq!(count(g.index(0, 0, 0)), 3);
+        assert_eq!(count(g.index(2, 3, 4)), 3);
+        assert_eq!(count(g.index(1, 2, 3)), 6);
+        let i = g.index(1, 2, 3);
+        assert_eq!(g.face_neighbour(i, [0, -1, 0]), Some(g.index(1, 1, 3)));
+        assert_eq!(g.face_neighbour(i, [0, 0, 1]), Some(g.index(1, 2, 4)));
+        assert_eq!(g.face_neighbour(g.index(2, 0, 0), [1, 0, 0]), None);
     }
 }

@@ -43,7 +43,7 @@
 //!   phantom volume stays, for stage 4 to flag).
 
 use crate::camera::Camera;
-use crate::geometry::grid::GridSpec;
+use crate::geometry::grid::{GridSpec, FACE_OFFSETS};
 use crate::geometry::TriMesh;
 use crate::maxflow::GridGraph;
 use crate::stages::reliability::sample_patch;
@@ -386,7 +386,6 @@ pub fn refine_timed(
     let face = 4.0 * std::f64::consts::PI / 3.0 * h * h;
     // The cut runs on the grid of the band's bounding box; voxels of the box outside the band
     // stay isolated nodes.
-    let [nx, ny, nz] = grid.dims;
     let mut lo = [usize::MAX; 3];
     let mut hi = [0usize; 3];
     for &i in &band {
@@ -405,36 +404,19 @@ pub fn refine_timed(
         let [x, y, z] = grid.coords(i);
         let mut source = 0.0;
         let mut sink = p.ballooning * h * h * h * balloon[k];
-        for (dx, dy, dz) in [
-            (1i64, 0i64, 0i64),
-            (-1, 0, 0),
-            (0, 1, 0),
-            (0, -1, 0),
-            (0, 0, 1),
-            (0, 0, -1),
-        ] {
-            let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
-            let outside_grid =
-                a < 0 || b < 0 || c < 0 || a >= nx as i64 || b >= ny as i64 || c >= nz as i64;
-            let j = if outside_grid {
-                usize::MAX
-            } else {
-                grid.index(a as usize, b as usize, c as usize)
-            };
-            if outside_grid || !occupied[j] {
-                source += face * rho[k];
-            } else if node_of[j] == u32::MAX {
-                sink += face * rho[k];
-            } else if (dx, dy, dz) > (0, 0, 0) {
-                let w = (face * (rho[k] + rho[node_of[j] as usize]) / 2.0) as f32;
-                let axis = if dx > 0 {
-                    0
-                } else if dy > 0 {
-                    1
-                } else {
-                    2
-                };
-                g.set_edge(node([x, y, z]), axis, w, w);
+        for offset in FACE_OFFSETS {
+            match grid.face_neighbour(i, offset) {
+                Some(j) if occupied[j] && node_of[j] == u32::MAX => sink += face * rho[k],
+                Some(j) if occupied[j] => {
+                    // Each edge once, from the voxel on its negative side.
+                    if offset > [0, 0, 0] {
+                        let w = (face * (rho[k] + rho[node_of[j] as usize]) / 2.0) as f32;
+                        let axis = offset.iter().position(|&o| o != 0).expect("a face");
+                        g.set_edge(node([x, y, z]), axis, w, w);
+                    }
+                }
+                // Outside the grid or the hull.
+                _ => source += face * rho[k],
             }
         }
         if p.pin_rims && source > 0.0 && on_rim(cams, &outlines, &grid.centre(x, y, z)) {

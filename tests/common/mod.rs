@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 use hullpose::camera::Camera;
+use hullpose::geometry::grid::{GridSpec, FACE_OFFSETS};
 use hullpose::geometry::TriMesh;
 use hullpose::synth::{SceneKind, SynthOptions};
 use nalgebra::{Vector2, Vector3};
@@ -116,18 +117,22 @@ impl Grid {
         let dims = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / size).ceil() as usize);
         Grid { lo, size, dims }
     }
+    /// The same grid as the pipeline describes it.
+    pub fn spec(&self) -> GridSpec {
+        GridSpec {
+            origin: self.lo,
+            voxel: self.size,
+            dims: self.dims,
+        }
+    }
     pub fn len(&self) -> usize {
-        self.dims[0] * self.dims[1] * self.dims[2]
+        self.spec().len()
     }
     pub fn index(&self, x: usize, y: usize, z: usize) -> usize {
-        x + self.dims[0] * (y + self.dims[1] * z)
+        self.spec().index(x, y, z)
     }
     pub fn coords(&self, i: usize) -> [usize; 3] {
-        [
-            i % self.dims[0],
-            (i / self.dims[0]) % self.dims[1],
-            i / (self.dims[0] * self.dims[1]),
-        ]
+        self.spec().coords(i)
     }
     pub fn centre(&self, i: usize) -> Vector3<f64> {
         let c = self.coords(i);
@@ -214,26 +219,9 @@ pub fn voxelize(grid: &Grid, mesh: &TriMesh) -> Vec<bool> {
 pub fn dilate(grid: &Grid, set: &[bool]) -> Vec<bool> {
     let mut out = set.to_vec();
     for (i, _) in set.iter().enumerate().filter(|(_, &inside)| inside) {
-        {
-            let [x, y, z] = grid.coords(i);
-            for (dx, dy, dz) in [
-                (1i64, 0i64, 0i64),
-                (-1, 0, 0),
-                (0, 1, 0),
-                (0, -1, 0),
-                (0, 0, 1),
-                (0, 0, -1),
-            ] {
-                let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
-                if a >= 0
-                    && b >= 0
-                    && c >= 0
-                    && (a as usize) < grid.dims[0]
-                    && (b as usize) < grid.dims[1]
-                    && (c as usize) < grid.dims[2]
-                {
-                    out[grid.index(a as usize, b as usize, c as usize)] = true;
-                }
+        for offset in FACE_OFFSETS {
+            if let Some(j) = grid.spec().face_neighbour(i, offset) {
+                out[j] = true;
             }
         }
     }
@@ -242,6 +230,7 @@ pub fn dilate(grid: &Grid, set: &[bool]) -> Vec<bool> {
 
 /// 6-connected components of a voxel set: lists of voxel indices.
 pub fn components(grid: &Grid, set: &[bool]) -> Vec<Vec<usize>> {
+    let spec = grid.spec();
     let mut seen = vec![false; grid.len()];
     let mut out = Vec::new();
     for s in 0..grid.len() {
@@ -252,25 +241,10 @@ pub fn components(grid: &Grid, set: &[bool]) -> Vec<Vec<usize>> {
         seen[s] = true;
         let mut k = 0;
         while k < comp.len() {
-            let [x, y, z] = grid.coords(comp[k]);
+            let at = comp[k];
             k += 1;
-            for (dx, dy, dz) in [
-                (1i64, 0i64, 0i64),
-                (-1, 0, 0),
-                (0, 1, 0),
-                (0, -1, 0),
-                (0, 0, 1),
-                (0, 0, -1),
-            ] {
-                let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
-                if a >= 0
-                    && b >= 0
-                    && c >= 0
-                    && (a as usize) < grid.dims[0]
-                    && (b as usize) < grid.dims[1]
-                    && (c as usize) < grid.dims[2]
-                {
-                    let j = grid.index(a as usize, b as usize, c as usize);
+            for offset in FACE_OFFSETS {
+                if let Some(j) = spec.face_neighbour(at, offset) {
                     if set[j] && !seen[j] {
                         seen[j] = true;
                         comp.push(j);
