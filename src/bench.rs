@@ -405,6 +405,22 @@ pub fn track(
     joints: Option<&std::path::Path>,
     rounds: Option<&std::path::Path>,
 ) -> Result<String> {
+    // Checked before the tracking, which may take minutes.
+    for (flag, path) in [("--joints", joints), ("--rounds", rounds)] {
+        if let Some(path) = path {
+            let dir = path
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(std::path::Path::new("."));
+            if !dir.is_dir() {
+                return Err(crate::Error::Usage(format!(
+                    "{flag} {}: the folder {} does not exist; create it or write elsewhere",
+                    path.display(),
+                    dir.display()
+                )));
+            }
+        }
+    }
     let ctx = job.context();
     let mut params = job.config.fit.clone();
     if let Some(name) = method {

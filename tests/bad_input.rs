@@ -143,3 +143,26 @@ fn fit_solver_setting_out_of_range_names_the_key() {
         assert!(err.contains("pipeline.yaml") && err.contains(key), "{err}");
     }
 }
+
+#[test]
+fn bench_track_output_in_a_missing_folder_fails_before_tracking() {
+    let dir = tempfile::tempdir().unwrap();
+    copy_tree(pristine(), dir.path());
+    // Nothing is cached: the error must come before the tracking looks for the model.
+    let (ok, _out, err) = run_cli(
+        &[
+            "bench",
+            "track",
+            "pipeline.yaml",
+            "--rounds",
+            "no/such/rounds.csv",
+        ],
+        dir.path(),
+    );
+    assert!(!ok && !err.contains("panicked"), "{err}");
+    assert!(
+        err.contains("--rounds no/such/rounds.csv") && err.contains("does not exist"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "one clear error line: {err}");
+}
