@@ -217,10 +217,11 @@ pub fn voxelize(grid: &Grid, mesh: &TriMesh) -> Vec<bool> {
 
 /// Dilates a voxel set by one voxel (6-neighbourhood).
 pub fn dilate(grid: &Grid, set: &[bool]) -> Vec<bool> {
+    let spec = grid.spec();
     let mut out = set.to_vec();
     for (i, _) in set.iter().enumerate().filter(|(_, &inside)| inside) {
         for offset in FACE_OFFSETS {
-            if let Some(j) = grid.spec().face_neighbour(i, offset) {
+            if let Some(j) = spec.face_neighbour(i, offset) {
                 out[j] = true;
             }
         }
