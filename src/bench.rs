@@ -602,6 +602,11 @@ fn write_round_steps(
 ) {
     let mut sum = 0.0;
     for (step, secs) in steps {
+        // A step's parts ("rho_c: ...") are printed indented, and already in its sum.
+        if let Some(part) = step.strip_prefix("rho_c: ") {
+            let _ = writeln!(out, "      {part:<24} {:8.2} ms", secs * 1e3 / rounds);
+            continue;
+        }
         sum += secs;
         let _ = writeln!(out, "    {step:<26} {:8.2} ms", secs * 1e3 / rounds);
     }

@@ -56,6 +56,17 @@ pub fn rho_c(d: f64, p: &ContactParams) -> f64 {
     1.0 / (1.0 + (-p.alpha_c * (d - p.tau_c)).exp())
 }
 
+/// Seconds one [`ContactSearch::weights`] call spent in each of its parts.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ContactTimes {
+    /// Finding the vertices whose partner lists no longer serve.
+    pub staleness: f64,
+    /// Building those lists again (the parts' k-d trees and the searches).
+    pub rebuilding: f64,
+    /// Scanning every list for the nearest partner, and the weights.
+    pub scanning: f64,
+}
+
 /// The model's parts and the rule's exclusions, prepared once per sequence.
 pub struct ContactSearch {
     /// Reference (t0) vertices and their part labels.
@@ -115,9 +126,10 @@ fn nearest_listed(listed: &[u32], keys: &[[f32; 3]], v: usize) -> (f64, usize) {
     let (mut best2, mut best) = (f32::INFINITY, u32::MAX);
     for &w in listed {
         let d2 = key_distance2_f32(q, &keys[w as usize]);
-        if d2 < best2 {
-            (best2, best) = (d2, w);
-        }
+        // Selects, not a branch: which listed vertex is nearest so far is unpredictable.
+        let nearer = d2 < best2;
+        best = if nearer { w } else { best };
+        best2 = if nearer { d2 } else { best2 };
     }
     if best == u32::MAX {
         (f64::INFINITY, usize::MAX)
@@ -176,16 +188,23 @@ impl ContactSearch {
     /// others: w's part was near (else it is still beyond cut-off + 2 m - s_b > cut-off),
     /// and w then lay within d1(w) + m <= d1(old nearest) + m <= d0 + 2 m, and within
     /// cut-off + m. Vertices whose lists fail this get new lists at the current pose.
-    pub fn weights(&self, posed: &[Vector3<f64>], normals: &[Vector3<f64>]) -> Vec<f64> {
+    /// Also returns where the call's time went.
+    pub fn weights(
+        &self,
+        posed: &[Vector3<f64>],
+        normals: &[Vector3<f64>],
+    ) -> (Vec<f64>, ContactTimes) {
         let mut cache = self
             .partners
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let started = std::time::Instant::now();
         let stale: Vec<u32> = match cache.as_ref() {
             Some(c) if c.epoch_of.len() == posed.len() => self.stale_lists(c, posed),
             _ => (0..posed.len() as u32).collect(),
         };
         let keys: Vec<[f32; 3]> = posed.par_iter().map(key).collect();
+        let checked = std::time::Instant::now();
         if !stale.is_empty() {
             let c = match cache.as_mut() {
                 Some(c) if c.epoch_of.len() == posed.len() => c,
@@ -205,7 +224,8 @@ impl ContactSearch {
         }
         let lists = cache.as_ref().expect("partner lists were just built");
         let cutoff2 = self.cutoff * self.cutoff;
-        (0..posed.len())
+        let rebuilt = std::time::Instant::now();
+        let weights = (0..posed.len())
             .into_par_iter()
             .map(|v| {
                 let (d2, w) = nearest_listed(&lists.lists[v], &keys, v);
@@ -220,7 +240,13 @@ impl ContactSearch {
                 };
                 rho_c(signed, &self.params)
             })
-            .collect()
+            .collect();
+        let times = ContactTimes {
+            staleness: (checked - started).as_secs_f64(),
+            rebuilding: (rebuilt - checked).as_secs_f64(),
+            scanning: rebuilt.elapsed().as_secs_f64(),
+        };
+        (weights, times)
     }
 
     /// The vertices whose lists no longer serve at `posed` (see [`Self::weights`]).
@@ -515,7 +541,7 @@ mod tests {
                         _ => *x,
                     })
                     .collect();
-                let got = search.weights(&posed, &normals);
+                let got = search.weights(&posed, &normals).0;
                 let want = brute(&model, &p, &posed, &normals);
                 let worst = got
                     .iter()

@@ -137,6 +137,12 @@ pub enum NormalPairs {
 /// mostly one way (net close to the sum).
 pub const STALL_RATIO: f64 = 0.2;
 
+/// The parts of the `rho_c` step in [`Fitter::timings`] ([`contact::ContactTimes`]); their
+/// names begin with `rho_c: `, so that a report can tell them from whole steps.
+const RHO_C_STALENESS: &str = "rho_c: stale lists found";
+const RHO_C_REBUILDING: &str = "rho_c: lists rebuilt";
+const RHO_C_SCANNING: &str = "rho_c: lists scanned";
+
 /// How far the `nearest_compatible` search looks for a vertex whose normal agrees, metres.
 pub const COMPATIBLE_SEARCH_LIMIT: f64 = 0.2;
 
@@ -605,14 +611,18 @@ impl<'a> Fitter<'a> {
     fn time<T>(&self, step: &'static str, f: impl FnOnce() -> T) -> T {
         let start = std::time::Instant::now();
         let out = f();
-        let dt = start.elapsed().as_secs_f64();
+        self.add_time(step, start.elapsed().as_secs_f64());
+        out
+    }
+
+    /// Adds `dt` seconds to `step`'s time.
+    fn add_time(&self, step: &'static str, dt: f64) {
         if let Ok(mut t) = self.timings.lock() {
             match t.iter_mut().find(|x| x.0 == step) {
                 Some(x) => x.1 += dt,
                 None => t.push((step, dt)),
             }
         }
-        out
     }
 
     /// The diagnostics of the reference frame (pose p_t0 = the embedded skeleton).
@@ -958,7 +968,12 @@ impl<'a> Fitter<'a> {
         });
         let find_rho_c = || {
             if method.uses_rho_c() {
-                self.time("rho_c", || self.contact.weights(&posed, &normals))
+                let (weights, parts) =
+                    self.time("rho_c", || self.contact.weights(&posed, &normals));
+                self.add_time(RHO_C_STALENESS, parts.staleness);
+                self.add_time(RHO_C_REBUILDING, parts.rebuilding);
+                self.add_time(RHO_C_SCANNING, parts.scanning);
+                weights
             } else {
                 vec![1.0; posed.len()]
             }
