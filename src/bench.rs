@@ -602,8 +602,8 @@ fn write_round_steps(
 ) {
     let mut sum = 0.0;
     for (step, secs) in steps {
-        // A step's parts ("rho_c: ...") are printed indented, and already in its sum.
-        if let Some(part) = step.strip_prefix("rho_c: ") {
+        // A step's parts are printed indented, and already in its sum.
+        if let Some(part) = step.strip_prefix(crate::fit::STEP_PART_PREFIX) {
             let _ = writeln!(out, "      {part:<24} {:8.2} ms", secs * 1e3 / rounds);
             continue;
         }

@@ -137,8 +137,12 @@ pub enum NormalPairs {
 /// mostly one way (net close to the sum).
 pub const STALL_RATIO: f64 = 0.2;
 
-/// The parts of the `rho_c` step in [`Fitter::timings`] ([`contact::ContactTimes`]); their
-/// names begin with `rho_c: `, so that a report can tell them from whole steps.
+/// The names of a step's parts in [`Fitter::timings`] begin with this, so that a report can
+/// tell them from whole steps (whose sum already holds them).
+pub const STEP_PART_PREFIX: &str = "rho_c: ";
+
+/// The parts of the `rho_c` step in [`Fitter::timings`] ([`contact::ContactTimes`]), each
+/// named with [`STEP_PART_PREFIX`].
 const RHO_C_STALENESS: &str = "rho_c: stale lists found";
 const RHO_C_REBUILDING: &str = "rho_c: lists rebuilt";
 const RHO_C_SCANNING: &str = "rho_c: lists scanned";
