@@ -137,15 +137,22 @@ pub enum NormalPairs {
 /// mostly one way (net close to the sum).
 pub const STALL_RATIO: f64 = 0.2;
 
+/// The name of a part of the `rho_c` step in [`Fitter::timings`]: [`STEP_PART_PREFIX`]
+/// followed by `$part` (one literal, so the two cannot drift apart).
+macro_rules! rho_c_part {
+    ($part:literal) => {
+        concat!("rho_c: ", $part)
+    };
+}
+
 /// The names of a step's parts in [`Fitter::timings`] begin with this, so that a report can
 /// tell them from whole steps (whose sum already holds them).
-pub const STEP_PART_PREFIX: &str = "rho_c: ";
+pub const STEP_PART_PREFIX: &str = rho_c_part!("");
 
-/// The parts of the `rho_c` step in [`Fitter::timings`] ([`contact::ContactTimes`]), each
-/// named with [`STEP_PART_PREFIX`].
-const RHO_C_STALENESS: &str = "rho_c: stale lists found";
-const RHO_C_REBUILDING: &str = "rho_c: lists rebuilt";
-const RHO_C_SCANNING: &str = "rho_c: lists scanned";
+/// The parts of the `rho_c` step in [`Fitter::timings`] ([`contact::ContactTimes`]).
+const RHO_C_STALENESS: &str = rho_c_part!("stale lists found");
+const RHO_C_REBUILDING: &str = rho_c_part!("lists rebuilt");
+const RHO_C_SCANNING: &str = rho_c_part!("lists scanned");
 
 /// How far the `nearest_compatible` search looks for a vertex whose normal agrees, metres.
 pub const COMPATIBLE_SEARCH_LIMIT: f64 = 0.2;
