@@ -131,6 +131,7 @@ fn fit_solver_setting_out_of_range_names_the_key() {
             "tangential_weight",
         ),
         ("  tangential_weight: 1.5\n", "tangential_weight"),
+        ("  held_tangential_weight: 0\n", "held_tangential_weight"),
         ("  solver: newton\n", "solver"),
         ("  model_spacing: -0.01\n", "model_spacing"),
         ("  sample_spacing: -1\n", "sample_spacing"),

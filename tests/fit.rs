@@ -1,5 +1,6 @@
 //! Stage 6 on exact observations: with the true surface observed, the fit recovers the
-//! true pose from the previous frame's (with either solver); a frame without observation keeps the previous pose
+//! true pose from the previous frame's (with either solver, and with the held energy
+//! weighted along the surface); a frame without observation keeps the previous pose
 //! and is flagged; damaged observations never put NaN into a pose; a lost fit's restarts
 //! never repeat a start; the round log records the rounds the fit did.
 
@@ -95,16 +96,19 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let model =
         hullpose::stages::model::build(&skeleton, &mesh(dir.path(), 0), &Default::default())
             .unwrap();
-    for (method, solver) in [
-        (Method::Proposed, Solver::Alternating),
-        (Method::Icp, Solver::Alternating),
-        (Method::Proposed, Solver::Direct),
+    // (method, solver, fit.held_tangential_weight).
+    for (method, solver, held) in [
+        (Method::Proposed, Solver::Alternating, 1.0),
+        (Method::Icp, Solver::Alternating, 1.0),
+        (Method::Proposed, Solver::Direct, 1.0),
+        (Method::Proposed, Solver::Alternating, 0.03),
     ] {
         let fitter = Fitter::new(
             &model,
             FitParams {
                 method,
                 solver,
+                held_tangential_weight: held,
                 ..Default::default()
             },
         );
@@ -113,11 +117,14 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
             let r = fitter.fit(&observe(&mesh(dir.path(), f)), &poses[f as usize - 1].1);
             let e = joint_error(&skeleton, &r.pose, &poses[f as usize].1);
             eprintln!(
-                "{method:?} {solver:?} t{f}: {:.2} mm, {:?}",
+                "{method:?} {solver:?} {held} t{f}: {:.2} mm, {:?}",
                 e * 1000.0,
                 r.diagnostics
             );
-            assert!(e < 0.004, "{method:?} {solver:?} t{f}: joint error {e} m");
+            assert!(
+                e < 0.004,
+                "{method:?} {solver:?} {held} t{f}: joint error {e} m"
+            );
             assert_eq!(r.diagnostics.status, FitStatus::Converged);
             check_round_log(&fitter.take_rounds(), &r, solver);
         }

@@ -194,6 +194,13 @@ pub struct FitParams {
     pub max_iterations: usize,
     /// LM steps per round (correspondences held). Default 3.
     pub lm_steps: usize,
+    /// For `alternating`: the weight of a pair's offset along the surface in the held
+    /// energy the LM steps minimize, (0, 1]; the offset along the model's normal weighs 1.
+    /// Default 1: eq. 4's point-to-point energy. Below 1 the held minimum slides along the
+    /// observed surface within a round, as point-to-plane ICP does, where point-to-point
+    /// rounds slide one partner change at a time: fewer rounds, and the rounds settle where
+    /// this weighted energy stops falling, not eq. 4 (README "fit").
+    pub held_tangential_weight: f64,
     /// Spacing of the observed vertices the energy runs over, metres: each frame's surface
     /// is thinned to one vertex per cube of this size (the vertex nearest the cube's
     /// centre), about the paper's 1 cm triangles. 0 keeps every vertex. Default 0.01.
@@ -262,6 +269,7 @@ impl Default for FitParams {
             tangential_weight: 0.1,
             max_iterations: 120,
             lm_steps: 3,
+            held_tangential_weight: 1.0,
             acceleration: 5,
             sample_spacing: 0.01,
             model_spacing: 0.01,
@@ -290,11 +298,13 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
             p.normal_angle_deg
         ));
     }
-    if !(p.tangential_weight > 0.0 && p.tangential_weight <= 1.0) {
-        return Err(format!(
-            "fit.tangential_weight must be in (0, 1], got {}",
-            p.tangential_weight
-        ));
+    for (key, weight) in [
+        ("tangential_weight", p.tangential_weight),
+        ("held_tangential_weight", p.held_tangential_weight),
+    ] {
+        if !(weight > 0.0 && weight <= 1.0) {
+            return Err(format!("fit.{key} must be in (0, 1], got {weight}"));
+        }
     }
     if p.max_iterations == 0 || p.lm_steps == 0 || p.restart_max_iterations == 0 {
         return Err(
@@ -904,7 +914,7 @@ impl<'a> Fitter<'a> {
         let mut stall = StallWatch::new(p.stall_rounds, joints_of(self.model, &pose));
         while diagnostics.iterations < cap {
             let (stepped, report) = self.time("lm steps", || {
-                let problem = self.held(&round);
+                let problem = self.held(&round).with_tangential(p.held_tangential_weight);
                 solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut lambda)
             });
             diagnostics.iterations += 1;

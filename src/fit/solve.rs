@@ -8,7 +8,7 @@
 //! weight W_v times the squared distance to their weighted mean c_v. So each model vertex
 //! contributes one 3-row residual, with the analytic Jacobian of linear blend skinning.
 
-use super::moments::RigidMoments;
+use super::moments::{PlaneMoments, RigidMoments};
 use crate::skeleton::skinning::{pose_vertex, sparse_vertex_jacobian, Influences};
 use crate::skeleton::{Pose, PosedBones, Skeleton};
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -37,6 +37,11 @@ pub struct HeldProblem<'a> {
     rigid: Vec<RigidMoments>,
     /// Indices (into `targets.pulls`) of the blended vertices, summed one by one.
     blended: Vec<u32>,
+    /// The held energy's weight of a residual's part along the surface (see
+    /// [`HeldProblem::with_tangential`]); 1: eq. 4's point-to-point energy.
+    tangential: f64,
+    /// With `tangential` below 1, the rigid pulls' parts along their normals, per bone.
+    plane: Vec<PlaneMoments>,
 }
 
 impl<'a> HeldProblem<'a> {
@@ -75,12 +80,59 @@ impl<'a> HeldProblem<'a> {
             targets,
             rigid,
             blended,
+            tangential: 1.0,
+            plane: Vec::new(),
+        }
+    }
+
+    /// The held problem whose energy weighs each pull's residual r by
+    /// M = n n^T + `tangential` (I - n n^T) (n the pull's normal, held at the round's pose):
+    /// the part along the surface by `tangential` in (0, 1], the part along the normal
+    /// fully. Below 1 the held minimum lets the model slide along the observed surface
+    /// within one round, which the point-to-point rounds do one partner change at a time
+    /// (`fit.held_tangential_weight`).
+    pub fn with_tangential(mut self, tangential: f64) -> HeldProblem<'a> {
+        self.tangential = tangential;
+        if tangential < 1.0 {
+            let pulls = &self.targets.pulls;
+            let mut per_bone: Vec<Vec<u32>> = vec![Vec::new(); self.skeleton.bones.len()];
+            for (i, &(v, _, _)) in pulls.iter().enumerate() {
+                if let [(b, w)] = self.weights[v as usize].as_slice() {
+                    if *w == 1.0 {
+                        per_bone[*b].push(i as u32);
+                    }
+                }
+            }
+            let (rest, normals) = (self.rest, &self.targets.normals);
+            self.plane = per_bone
+                .par_iter()
+                .enumerate()
+                .filter_map(|(b, mine)| {
+                    let pulls = mine.iter().map(|&i| {
+                        let (v, w, c) = pulls[i as usize];
+                        (rest[v as usize], w, c, normals[i as usize])
+                    });
+                    PlaneMoments::new(b, pulls)
+                })
+                .collect();
+        }
+        self
+    }
+
+    /// The Gauss-Newton system of the held energy itself (see
+    /// [`HeldProblem::with_tangential`]): H, g and the energy all weigh residuals by M.
+    pub fn held_equations(&self, pose: &Pose) -> (DMatrix<f64>, DVector<f64>, f64) {
+        if self.tangential < 1.0 {
+            self.summed(pose, self.tangential, &self.blended, &self.rigid, true)
+        } else {
+            self.normal_equations(pose, 1.0)
         }
     }
 
     /// sum_v W_v |v(p) - c_v|^2 (m^2).
     pub fn energy(&self, pose: &Pose) -> f64 {
         let bones = PosedBones::new(self.skeleton, pose);
+        let t = self.tangential;
         // Fixed chunks summed in order: the same bits on every run and thread count.
         let partial: Vec<f64> = self
             .blended
@@ -91,13 +143,24 @@ impl<'a> HeldProblem<'a> {
                     .map(|&i| {
                         let (v, w, c) = self.targets.pulls[i as usize];
                         let v = v as usize;
-                        w * (pose_vertex(&bones, &self.rest[v], &self.weights[v]) - c)
-                            .norm_squared()
+                        let r = pose_vertex(&bones, &self.rest[v], &self.weights[v]) - c;
+                        if t < 1.0 {
+                            let along = self.targets.normals[i as usize].dot(&r);
+                            w * (t * r.norm_squared() + (1.0 - t) * along * along)
+                        } else {
+                            w * r.norm_squared()
+                        }
                     })
                     .sum::<f64>()
             })
             .collect();
-        partial.iter().sum::<f64>() + self.rigid.iter().map(|m| m.energy(&bones)).sum::<f64>()
+        let rigid = self.rigid.iter().map(|m| m.energy(&bones)).sum::<f64>();
+        if t < 1.0 {
+            let plane = self.plane.iter().map(|m| m.energy(&bones)).sum::<f64>();
+            partial.iter().sum::<f64>() + t * rigid + (1.0 - t) * plane
+        } else {
+            partial.iter().sum::<f64>() + rigid
+        }
     }
 
     /// The Gauss-Newton system at `pose`: H = sum W J^T M J, g = sum W J^T r, and the
@@ -112,9 +175,9 @@ impl<'a> HeldProblem<'a> {
     ) -> (DMatrix<f64>, DVector<f64>, f64) {
         if tangential < 1.0 {
             // The tangential H needs each vertex's normal: every pull one by one.
-            return self.summed(pose, tangential, &self.every_pull(), &[]);
+            return self.summed(pose, tangential, &self.every_pull(), &[], false);
         }
-        self.summed(pose, 1.0, &self.blended, &self.rigid)
+        self.summed(pose, 1.0, &self.blended, &self.rigid, false)
     }
 
     /// Indices of every pull.
@@ -123,13 +186,16 @@ impl<'a> HeldProblem<'a> {
     }
 
     /// The normal equations of the pulls `each` summed vertex by vertex and of `rigid` in
-    /// closed form.
+    /// closed form. `weighted`: the residuals, and so g and the energy, are weighed by M
+    /// too (the held energy of [`HeldProblem::with_tangential`]; `rigid` then counts
+    /// `tangential` times, and [`HeldProblem::plane`] the rest); otherwise only H is.
     fn summed(
         &self,
         pose: &Pose,
         tangential: f64,
         each: &[u32],
         rigid: &[RigidMoments],
+        weighted: bool,
     ) -> (DMatrix<f64>, DVector<f64>, f64) {
         let bones = PosedBones::new(self.skeleton, pose);
         let n = pose.parameter_count();
@@ -154,8 +220,17 @@ impl<'a> HeldProblem<'a> {
                         &self.weights[v],
                         &mut acc.blocks,
                     );
-                    let r = y - c;
-                    acc.e += w * r.norm_squared();
+                    let mut r = y - c;
+                    if weighted {
+                        // r^T M r, and M r in place of r in g.
+                        let normal = self.targets.normals[pull as usize];
+                        let along = normal.dot(&r);
+                        let t = tangential;
+                        acc.e += w * (t * r.norm_squared() + (1.0 - t) * along * along);
+                        r = t * r + (1.0 - t) * along * normal;
+                    } else {
+                        acc.e += w * r.norm_squared();
+                    }
                     // Columns: the translation's identity, then each block's three.
                     acc.cols.clear();
                     for k in 0..3 {
@@ -224,10 +299,17 @@ impl<'a> HeldProblem<'a> {
         }
         if !rigid.is_empty() {
             // The closed-form terms, both triangles.
+            let share = if weighted { tangential } else { 1.0 };
             h.fill(0.0);
             for m in rigid {
-                m.add_normal_equations(&bones, &mut h, &mut g);
-                e += m.energy(&bones);
+                m.add_normal_equations(&bones, share, &mut h, &mut g);
+                e += share * m.energy(&bones);
+            }
+            if weighted {
+                for m in &self.plane {
+                    m.add_normal_equations(&bones, 1.0 - tangential, &mut h, &mut g);
+                    e += (1.0 - tangential) * m.energy(&bones);
+                }
             }
             hm += DMatrix::from_row_slice(n, n, &h);
         }
@@ -272,7 +354,7 @@ pub fn levenberg_marquardt(
         energy_after: f64::NAN,
     };
     for _ in 0..max_steps {
-        let (h, g, e0) = problem.normal_equations(&pose, 1.0);
+        let (h, g, e0) = problem.held_equations(&pose);
         if report.steps == 0 {
             report.energy_before = e0;
             report.energy_after = e0;
@@ -327,7 +409,9 @@ mod tests {
     use nalgebra::Rotation3;
 
     /// The closed-form sums of the rigidly attached vertices give the same energy, gradient
-    /// and Gauss-Newton matrix as summing every vertex one by one.
+    /// and Gauss-Newton matrix as summing every vertex one by one: for eq. 4's
+    /// point-to-point held energy, and for the energy whose residuals are weighed along the
+    /// surface by 0.3 and 0.05 ([`HeldProblem::with_tangential`]).
     #[test]
     fn rigid_moments_match_the_sum_over_vertices() {
         let p = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
@@ -339,7 +423,7 @@ mod tests {
         let weights = skin_weights(&skeleton, &rest, 0.05);
         let rigid = weights.iter().filter(|w| w.len() == 1).count();
         assert!(rigid > 1000 && rigid < rest.len(), "{rigid} rigid vertices");
-        // Every other vertex pulled towards a point near it.
+        // Every other vertex pulled towards a point near it, along a normal of its own.
         let pulls: Vec<(u32, f64, Vector3<f64>)> = (0..rest.len())
             .step_by(2)
             .map(|v| {
@@ -347,27 +431,36 @@ mod tests {
                 (v as u32, 0.1 + rnd().abs(), c)
             })
             .collect();
-        let normals = vec![Vector3::z(); pulls.len()];
+        let normals = (0..pulls.len())
+            .map(|_| (p(rnd(), rnd(), rnd()) + p(0.0, 0.0, 0.3)).normalize())
+            .collect();
         let targets = Targets { pulls, normals };
-        let problem = HeldProblem::new(&skeleton, &rest, &weights, &targets);
-        for _ in 0..5 {
-            let mut pose = Pose::rest(skeleton.bones.len());
-            pose.translation = p(rnd(), rnd(), rnd()) * 0.1;
-            for r in &mut pose.rotations {
-                *r = Rotation3::new(p(rnd(), rnd(), rnd()) * 0.4);
+        for tangential in [1.0, 0.3, 0.05] {
+            let problem =
+                HeldProblem::new(&skeleton, &rest, &weights, &targets).with_tangential(tangential);
+            for _ in 0..5 {
+                let mut pose = Pose::rest(skeleton.bones.len());
+                pose.translation = p(rnd(), rnd(), rnd()) * 0.1;
+                for r in &mut pose.rotations {
+                    *r = Rotation3::new(p(rnd(), rnd(), rnd()) * 0.4);
+                }
+                let (h, g, e) = problem.held_equations(&pose);
+                let every = problem.every_pull();
+                let (h1, g1, e1) = problem.summed(&pose, tangential, &every, &[], true);
+                let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-9 * scale;
+                assert!(close(e, e1, e1), "{tangential}: {e} {e1}");
+                assert!(close(problem.energy(&pose), e1, e1), "{tangential}");
+                let hs = h1.abs().max();
+                assert!(
+                    h.iter().zip(h1.iter()).all(|(a, b)| close(*a, *b, hs)),
+                    "{tangential}"
+                );
+                let gs = g1.abs().max();
+                assert!(
+                    g.iter().zip(g1.iter()).all(|(a, b)| close(*a, *b, gs)),
+                    "{tangential}: {g} {g1}"
+                );
             }
-            let (h, g, e) = problem.normal_equations(&pose, 1.0);
-            let (h1, g1, e1) = problem.summed(&pose, 1.0, &problem.every_pull(), &[]);
-            let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-9 * scale;
-            assert!(close(e, e1, e1), "{e} {e1}");
-            assert!(close(problem.energy(&pose), e1, e1));
-            let hs = h1.abs().max();
-            assert!(h.iter().zip(h1.iter()).all(|(a, b)| close(*a, *b, hs)));
-            let gs = g1.abs().max();
-            assert!(
-                g.iter().zip(g1.iter()).all(|(a, b)| close(*a, *b, gs)),
-                "{g} {g1}"
-            );
         }
     }
 }
