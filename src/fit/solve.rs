@@ -129,7 +129,8 @@ impl<'a> HeldProblem<'a> {
         }
     }
 
-    /// sum_v W_v |v(p) - c_v|^2 (m^2).
+    /// sum_v W_v |v(p) - c_v|^2 (m^2); with [`HeldProblem::with_tangential`] below 1,
+    /// sum_v W_v r^T M r for r = v(p) - c_v.
     pub fn energy(&self, pose: &Pose) -> f64 {
         let bones = PosedBones::new(self.skeleton, pose);
         let t = self.tangential;
