@@ -33,7 +33,10 @@ pub struct HeldProblem<'a> {
     rest: &'a [Vector3<f64>],
     weights: &'a [Influences],
     targets: &'a Targets,
-    /// The pulls of vertices that move with one bone, summed per bone ([`RigidMoments`]).
+    /// Indices (into `targets.pulls`) of the pulls of vertices that move with one bone,
+    /// per bone.
+    rigid_pulls: Vec<Vec<u32>>,
+    /// Those pulls summed per bone ([`RigidMoments`]).
     rigid: Vec<RigidMoments>,
     /// Indices (into `targets.pulls`) of the blended vertices, summed one by one.
     blended: Vec<u32>,
@@ -78,6 +81,7 @@ impl<'a> HeldProblem<'a> {
             rest,
             weights,
             targets,
+            rigid_pulls: per_bone,
             rigid,
             blended,
             tangential: 1.0,
@@ -94,17 +98,9 @@ impl<'a> HeldProblem<'a> {
     pub fn with_tangential(mut self, tangential: f64) -> HeldProblem<'a> {
         self.tangential = tangential;
         if tangential < 1.0 {
-            let pulls = &self.targets.pulls;
-            let mut per_bone: Vec<Vec<u32>> = vec![Vec::new(); self.skeleton.bones.len()];
-            for (i, &(v, _, _)) in pulls.iter().enumerate() {
-                if let [(b, w)] = self.weights[v as usize].as_slice() {
-                    if *w == 1.0 {
-                        per_bone[*b].push(i as u32);
-                    }
-                }
-            }
-            let (rest, normals) = (self.rest, &self.targets.normals);
-            self.plane = per_bone
+            let (pulls, normals, rest) = (&self.targets.pulls, &self.targets.normals, self.rest);
+            self.plane = self
+                .rigid_pulls
                 .par_iter()
                 .enumerate()
                 .filter_map(|(b, mine)| {
