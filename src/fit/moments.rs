@@ -32,6 +32,21 @@ fn weighted_means(
     (weight > 0.0).then(|| (weight, xs / weight, cs / weight))
 }
 
+/// The rotation parameters that move a point rigidly attached to `bone` at `at` (metres):
+/// (parameter index, increment axis u, arm at - head_a) for each axis of every bone a on the
+/// chain, in the order of [`PosedBones::add_point_jacobian`].
+fn rotation_columns(
+    bones: &PosedBones,
+    bone: usize,
+    at: Vector3<f64>,
+) -> impl Iterator<Item = (usize, Vector3<f64>, Vector3<f64>)> + '_ {
+    bones.chains[bone].iter().flat_map(move |&b| {
+        let arm = at - bones.heads[b];
+        let axes = bones.increment_axes[b];
+        (0..3).map(move |k| (3 + 3 * b + k, axes.column(k).into_owned(), arm))
+    })
+}
+
 /// The centred moments of one bone's rigidly attached pulls (see the module's text).
 #[derive(Debug, Clone)]
 pub struct RigidMoments {
@@ -119,15 +134,8 @@ impl RigidMoments {
             a[(0, 1)] - a[(1, 0)],
         );
         // Columns: (parameter, axis u, arm d) per rotation parameter on the chain.
-        let chain = &bones.chains[self.bone];
-        let columns: Vec<(usize, Vector3<f64>, Vector3<f64>)> = chain
-            .iter()
-            .flat_map(|&b| {
-                let d = mean - bones.heads[b];
-                let axes = bones.increment_axes[b];
-                (0..3).map(move |k| (3 + 3 * b + k, axes.column(k).into_owned(), d))
-            })
-            .collect();
+        let columns: Vec<(usize, Vector3<f64>, Vector3<f64>)> =
+            rotation_columns(bones, self.bone, mean).collect();
         for k in 0..3 {
             h[k * n + k] += scale * s;
             g[k] += scale * s * rho[k];
@@ -243,21 +251,17 @@ impl PlaneMoments {
                 )
             })
             .collect();
-        for &b in &bones.chains[self.bone] {
-            let arm = mean - bones.heads[b];
-            for k in 0..3 {
-                let u: Vector3<f64> = bones.increment_axes[b].column(k).into_owned();
-                let turned = u.cross_matrix() * rotation;
-                let moved = u.cross(&arm);
-                let column = SVector::from_fn(|i, _| {
-                    if i < 9 {
-                        turned[(i / 3, i % 3)]
-                    } else {
-                        moved[i - 9]
-                    }
-                });
-                columns.push((3 + 3 * b + k, column));
-            }
+        for (parameter, u, arm) in rotation_columns(bones, self.bone, mean) {
+            let turned = u.cross_matrix() * rotation;
+            let moved = u.cross(&arm);
+            let column = SVector::from_fn(|i, _| {
+                if i < 9 {
+                    turned[(i / 3, i % 3)]
+                } else {
+                    moved[i - 9]
+                }
+            });
+            columns.push((parameter, column));
         }
         let theta = self.theta(bones);
         let residual = self.a * theta - self.b;
