@@ -12,6 +12,7 @@
 
 mod anderson;
 pub mod contact;
+mod hold;
 pub mod kept_nearest;
 mod moments;
 pub mod solve;
@@ -252,6 +253,12 @@ pub struct FitParams {
     /// from the answer than the prediction, and with `max_iterations` rounds the humanoid's
     /// restarts at t22 all ended with the right hand folded back (its tip 29 cm off).
     pub restart_max_iterations: usize,
+    /// The hold on hidden parts ([`hold::HiddenHold`]): a bone that rho_c hides nearly
+    /// whole (a hand resting on a thigh) is pulled towards the turn about its joint that it
+    /// had in the previous frame, with this share of the weight a fully observed vertex's
+    /// pairs carry. 0 (the default) is the paper's eq. 4 alone; 1 halves the humanoid's
+    /// rounds (README "Robust articulated fitting"). Only methods with rho_c are affected.
+    pub hidden_hold: f64,
 }
 
 impl Default for FitParams {
@@ -280,6 +287,7 @@ impl Default for FitParams {
             restart_energy_ratio: 3.0,
             restart_turn_deg: 45.0,
             restart_max_iterations: 400,
+            hidden_hold: 0.0,
         }
     }
 }
@@ -325,6 +333,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         return Err(format!(
             "fit.tolerance must be a positive distance in metres, got {}",
             p.tolerance
+        ));
+    }
+    if !(p.hidden_hold >= 0.0 && p.hidden_hold.is_finite()) {
+        return Err(format!(
+            "fit.hidden_hold must be 0 (off) or a positive share, got {}",
+            p.hidden_hold
         ));
     }
     if !(p.restart_energy_ratio.is_finite() && p.restart_energy_ratio >= 1.0) {
@@ -409,7 +423,7 @@ pub struct FitDiagnostics {
     /// Accepted LM steps over all rounds.
     pub lm_steps: usize,
     /// Paper eq. 4 at the final pose with the final pairs (weights normalized by R_c R_p,
-    /// m^2).
+    /// m^2), plus the holds on hidden parts when `fit.hidden_hold` is on (normalized alike).
     pub energy: f64,
     /// Weighted root-mean-square pair distance at the end, metres.
     pub rms: f64,
@@ -521,6 +535,9 @@ struct Prepared {
     kept: std::sync::Mutex<(MovingQueries, MovingPoints)>,
     /// Observed vertices before thinning (for the diagnostics).
     observed: usize,
+    /// The pose the holds on hidden parts hold to ([`hold::HiddenHold`]): the previous
+    /// frame's.
+    anchor: Pose,
 }
 
 /// Everything one round's pairs give: the held targets and the energy's bookkeeping.
@@ -534,15 +551,19 @@ struct Round {
     /// R_c R_p.
     normalizer: f64,
     contact_share: f64,
+    /// The holds on hidden parts at this round's pose and rho_c, and their energy there
+    /// (unnormalized, as `weighted_sq`).
+    hold: hold::HiddenHold,
+    hold_energy: f64,
     /// `weighted_sq` and `normalizer` with rho_c taken as 1 (see [`Round::score`]).
     scored_sq: f64,
     score_normalizer: f64,
 }
 
 impl Round {
-    /// Paper eq. 4 with these pairs and weights.
+    /// Paper eq. 4 with these pairs and weights, plus the holds on hidden parts.
     fn energy(&self) -> f64 {
-        self.weighted_sq / self.normalizer
+        (self.weighted_sq + self.hold_energy) / self.normalizer
     }
 
     /// The round's score, comparable between starts and frames, m^2: the method's own
@@ -669,7 +690,7 @@ impl<'a> Fitter<'a> {
         previous_fit: Option<&FitDiagnostics>,
     ) -> FitResult {
         let p = &self.params;
-        let Some(prepared) = self.prepare(obs) else {
+        let Some(prepared) = self.prepare(obs, previous) else {
             return self.unobserved(obs, previous);
         };
         // Apply the last frame-to-frame motion once more: L_pred = (L L_before⁻¹) L.
@@ -753,8 +774,9 @@ impl<'a> Fitter<'a> {
     }
 
     /// The frame's observation as the rounds use it: finite vertices only, thinned to
-    /// `sample_spacing`, with its k-d tree; `None` when too little of it is left.
-    fn prepare(&self, obs: &Observation) -> Option<Prepared> {
+    /// `sample_spacing`, with its k-d tree; `None` when too little of it is left. `anchor`:
+    /// the pose the holds on hidden parts hold to.
+    fn prepare(&self, obs: &Observation, anchor: &Pose) -> Option<Prepared> {
         let p = &self.params;
         let model_vertices = self.model.mesh.vertices.len();
         if obs.vertices.is_empty()
@@ -795,13 +817,14 @@ impl<'a> Fitter<'a> {
             obs,
             tree,
             kept: Default::default(),
+            anchor: anchor.clone(),
         })
     }
 
     /// Fits one frame's `obs` starting from `start`; a frame without enough observation
     /// keeps `start`.
     pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
-        match self.prepare(obs) {
+        match self.prepare(obs, start) {
             Some(prepared) => self.fit_prepared(&prepared, start, self.params.max_iterations),
             None => self.unobserved(obs, start),
         }
@@ -968,6 +991,7 @@ impl<'a> Fitter<'a> {
             &self.sample.weights,
             &round.targets,
         )
+        .with_hold(&round.hold)
     }
 
     /// Step (a): pose the model, its normals and rho_c, pairs both ways and their weights.
@@ -975,7 +999,7 @@ impl<'a> Fitter<'a> {
         let p = &self.params;
         let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
         let m = &self.sample;
-        let (posed, normals) = self.time("pose, normals", || {
+        let (bones, posed, normals) = self.time("pose, normals", || {
             let bones = PosedBones::new(&m.skeleton, pose);
             let posed = pose_vertices(&bones, &m.mesh.vertices, &m.weights);
             // A normal turns with its vertex's dominant bone.
@@ -985,7 +1009,7 @@ impl<'a> Fitter<'a> {
                 .zip(&m.labels)
                 .map(|(n, &l)| bones.rotations[l] * n)
                 .collect();
-            (posed, normals)
+            (bones, posed, normals)
         });
         let find_rho_c = || {
             if method.uses_rho_c() {
@@ -1126,7 +1150,7 @@ impl<'a> Fitter<'a> {
             // The sums over all pairs, serially in the pairs' order (forward, then
             // backward): the same bits on every run.
             let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
-            let mut scored_sq = 0.0;
+            let (mut scored_sq, mut scored_weight) = (0.0, 0.0);
             let pairs = forward
                 .iter()
                 .zip(&forward_weights)
@@ -1141,6 +1165,7 @@ impl<'a> Fitter<'a> {
                 }
                 if ws > 0.0 {
                     scored_sq += ws * d2;
+                    scored_weight += ws;
                 }
             }
             // Each model vertex's pulls: its own pair, then the observed vertices whose
@@ -1199,7 +1224,26 @@ impl<'a> Fitter<'a> {
                     Method::Proposed | Method::RhoP => obs.rho_p.iter().sum(),
                     _ => n_obs,
                 };
+            // A fully observed vertex's pairs weigh, on average, the pairs' weights without
+            // rho_c per model vertex: the holds' unit.
+            let hold = if p.hidden_hold > 0.0 && method.uses_rho_c() {
+                let scale = p.hidden_hold * scored_weight / n.max(1) as f64;
+                hold::HiddenHold::new(
+                    &m.skeleton,
+                    &bones,
+                    &posed,
+                    &m.weights,
+                    &rho_c,
+                    scale,
+                    &prepared.anchor,
+                )
+            } else {
+                hold::HiddenHold::default()
+            };
+            let hold_energy = hold.energy(pose);
             Round {
+                hold,
+                hold_energy,
                 targets: Targets {
                     pulls,
                     normals: pull_normals,

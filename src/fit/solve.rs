@@ -8,6 +8,7 @@
 //! weight W_v times the squared distance to their weighted mean c_v. So each model vertex
 //! contributes one 3-row residual, with the analytic Jacobian of linear blend skinning.
 
+use super::hold::HiddenHold;
 use super::moments::{PlaneMoments, RigidMoments};
 use crate::skeleton::skinning::{pose_vertex, sparse_vertex_jacobian, Influences};
 use crate::skeleton::{Pose, PosedBones, Skeleton};
@@ -45,6 +46,8 @@ pub struct HeldProblem<'a> {
     tangential: f64,
     /// With `tangential` below 1, the rigid pulls' parts along their normals, per bone.
     plane: Vec<PlaneMoments>,
+    /// The holds on hidden parts, added to the energy ([`HeldProblem::with_hold`]).
+    hold: Option<&'a HiddenHold>,
 }
 
 impl<'a> HeldProblem<'a> {
@@ -86,7 +89,20 @@ impl<'a> HeldProblem<'a> {
             blended,
             tangential: 1.0,
             plane: Vec::new(),
+            hold: None,
         }
+    }
+
+    /// The held problem with the round's holds on hidden parts added to its energy
+    /// (`fit.hidden_hold`, [`HiddenHold`]).
+    pub fn with_hold(mut self, hold: &'a HiddenHold) -> HeldProblem<'a> {
+        self.hold = (!hold.is_empty()).then_some(hold);
+        self
+    }
+
+    /// The holds' energy at `pose` (0 without holds).
+    fn hold_energy(&self, pose: &Pose) -> f64 {
+        self.hold.map_or(0.0, |h| h.energy(pose))
     }
 
     /// The held problem whose energy weighs each pull's residual r by
@@ -152,12 +168,13 @@ impl<'a> HeldProblem<'a> {
             })
             .collect();
         let rigid = self.rigid.iter().map(|m| m.energy(&bones)).sum::<f64>();
-        if t < 1.0 {
+        let held = if t < 1.0 {
             let plane = self.plane.iter().map(|m| m.energy(&bones)).sum::<f64>();
             partial.iter().sum::<f64>() + t * rigid + (1.0 - t) * plane
         } else {
             partial.iter().sum::<f64>() + rigid
-        }
+        };
+        held + self.hold_energy(pose)
     }
 
     /// The Gauss-Newton system at `pose`: H = sum W J^T M J, g = sum W J^T r, and the
@@ -310,7 +327,11 @@ impl<'a> HeldProblem<'a> {
             }
             hm += DMatrix::from_row_slice(n, n, &h);
         }
-        (hm, DVector::from_vec(g), e)
+        let mut g = DVector::from_vec(g);
+        if let Some(hold) = self.hold {
+            e += hold.add_normal_equations(pose, &mut hm, &mut g);
+        }
+        (hm, g, e)
     }
 }
 
