@@ -77,12 +77,7 @@ fn proposed_fit_tracks_the_humanoid_and_beats_icp_where_parts_touch() {
         ..Default::default()
     };
     let held = hullpose::stages::fit::track(&ctx, &tracked, &params, &|_| {}).unwrap();
-    let rows: Vec<_> = held
-        .results
-        .iter()
-        .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
-        .collect();
-    let with_hold = errors_cm(&rows);
+    let with_hold = errors_cm(&joint_rows_of(&model.skeleton, &held));
     eprintln!("proposed, hidden_hold 1: {with_hold:.2?}");
     let worst = with_hold.iter().copied().fold(0.0, f64::max);
     assert!(
@@ -102,11 +97,12 @@ fn proposed_fit_tracks_the_humanoid_and_beats_icp_where_parts_touch() {
         .iter()
         .map(|(_, r)| r.diagnostics.iterations)
         .sum();
-    let fit_csv = std::fs::read_to_string(d.join("output/fit.csv")).unwrap();
-    let rounds: usize = fit_csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').nth(2).unwrap().parse::<usize>().unwrap())
+    let fit_csv = d.join("output/fit.csv");
+    let text = std::fs::read_to_string(&fit_csv).unwrap();
+    let rounds: usize = hullpose::stages::fit::parse_diagnostics(&fit_csv, &text)
+        .unwrap()
+        .iter()
+        .map(|(_, d)| d.iterations)
         .sum();
     assert!(
         rounds_with_hold < rounds,

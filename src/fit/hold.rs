@@ -78,14 +78,14 @@ impl HiddenHold {
             let hidden = 1.0 - rho;
             for &(b, w) in influences {
                 let a = y - bones.heads[b];
-                whole[b] += w * a.norm_squared();
-                hidden_part[b] += hidden * w * a.norm_squared();
+                let a2 = a.norm_squared();
+                whole[b] += w * a2;
+                hidden_part[b] += hidden * w * a2;
                 if hidden < LEAST_HIDDEN || skeleton.bones[b].parent.is_none() {
                     continue;
                 }
                 // [a]x^T [a]x = |a|^2 I - a a^T.
-                inertia[b] +=
-                    hidden * w * (Matrix3::identity() * a.norm_squared() - a * a.transpose());
+                inertia[b] += hidden * w * (Matrix3::identity() * a2 - a * a.transpose());
                 any[b] = true;
             }
         }
@@ -170,8 +170,8 @@ fn inverse_left_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::skeleton::skinning::skin_weights;
     use crate::skeleton::skinning::tests::{chain, signed_uniform};
+    use crate::skeleton::skinning::{pose_vertex, skin_weights};
 
     /// The holds' gradient is the derivative of their energy along the pose increments
     /// (central differences), at turns of up to about a radian from the anchor; a bone
@@ -208,7 +208,7 @@ mod tests {
         let posed: Vec<Vector3<f64>> = rest
             .iter()
             .zip(&weights)
-            .map(|(x, w)| crate::skeleton::skinning::pose_vertex(&bones, x, w))
+            .map(|(x, w)| pose_vertex(&bones, x, w))
             .collect();
         let hold = HiddenHold::new(&skeleton, &bones, &posed, &weights, &rho_c, 2.0, &anchor);
         // Held: exactly the non-root bones that move a hidden vertex.

@@ -330,8 +330,16 @@ pub fn tracked_joint_rows(
     frames: &[u32],
     params: &hullpose::fit::FitParams,
 ) -> Vec<hullpose::joints::JointRow> {
-    hullpose::stages::fit::track(ctx, frames, params, &|_| {})
-        .unwrap()
+    let tracked = hullpose::stages::fit::track(ctx, frames, params, &|_| {}).unwrap();
+    joint_rows_of(skeleton, &tracked)
+}
+
+/// The joint rows of every frame of a tracking.
+pub fn joint_rows_of(
+    skeleton: &hullpose::skeleton::Skeleton,
+    tracked: &hullpose::stages::fit::Tracked,
+) -> Vec<hullpose::joints::JointRow> {
+    tracked
         .results
         .iter()
         .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(skeleton, *f, &r.pose))
