@@ -256,7 +256,7 @@ enum BenchWhat {
         joints: Option<PathBuf>,
         /// Also write every round of every frame's fit here (CSV: its largest joint motion,
         /// eq. 4 and, with ground truth, the mean joint error after it): how much each round
-        /// buys, for tuning fit.tolerance and fit.max_iterations.
+        /// buys, for tuning fit.stop.tolerance and fit.stop.max_rounds.
         #[arg(long)]
         rounds: Option<PathBuf>,
     },

@@ -126,13 +126,12 @@ fn pipeline_yaml_with_unknown_key_names_key_and_line() {
 #[test]
 fn fit_solver_setting_out_of_range_names_the_key() {
     for (setting, key) in [
-        (
-            "  solver: direct\n  tangential_weight: 0\n",
-            "tangential_weight",
-        ),
-        ("  tangential_weight: 1.5\n", "tangential_weight"),
-        ("  held_tangential_weight: 0\n", "held_tangential_weight"),
-        ("  solver: newton\n", "solver"),
+        ("  stop:\n    tolerance: 0\n", "tolerance"),
+        ("  stop:\n    max_rounds: 0\n", "max_rounds"),
+        ("  contact:\n    tau_c: -1\n", "tau_c"),
+        ("  restart:\n    turn_deg: 200\n", "turn_deg"),
+        ("  hidden_hold: 1\n", "hidden_hold"),
+        ("  solver: direct\n", "solver"),
         ("  model_spacing: -0.01\n", "model_spacing"),
         ("  sample_spacing: -1\n", "sample_spacing"),
     ] {

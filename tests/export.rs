@@ -333,7 +333,7 @@ fn export_rewrites_from_the_cache_alone() {
     let yaml = std::fs::read_to_string(copy.path().join("pipeline.yaml")).unwrap();
     std::fs::write(
         copy.path().join("pipeline.yaml"),
-        format!("{yaml}fit:\n  tolerance: 0.001\n"),
+        format!("{yaml}fit:\n  stop:\n    tolerance: 0.001\n"),
     )
     .unwrap();
     let (ok, _, err) = run_cli(&["export", "pipeline.yaml", "--format", "bvh"], copy.path());

@@ -109,35 +109,41 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     // The fit stage (method `proposed`, every frame) and the four baselines side by side:
     // each round's serial parts (LM steps, trees) of one overlap with the others' parallel
     // searches.
-    // Also `proposed` with the faster `direct` solver, over every frame.
-    use hullpose::fit::{FitParams, Method, Solver};
+    // Also `proposed` under neutral changes of its stopping rule (the tolerance halved and
+    // doubled, the round cap doubled), over every frame: the bounds must not hinge on them.
+    use hullpose::fit::{FitParams, Method};
     let method = |method| FitParams {
         method,
         ..Default::default()
     };
-    let direct = FitParams {
-        solver: Solver::Direct,
-        ..Default::default()
+    let neutral = |tolerance_factor: f64, cap_factor: usize| {
+        let mut p = FitParams::default();
+        p.stop.tolerance *= tolerance_factor;
+        p.stop.max_rounds *= cap_factor;
+        p
     };
     let runs = [
         (method(Method::Icp), 11),
         (method(Method::Normals), 11),
         (method(Method::RhoC), 8),
         (method(Method::RhoP), 10),
-        (direct, 18),
+        (neutral(0.5, 1), 18),
+        (neutral(2.0, 1), 18),
+        (neutral(1.0, 2), 18),
     ];
-    let (fit_run, [icp, normals, rho_c, rho_p, direct]) = std::thread::scope(|s| {
-        let fit_run = s.spawn(|| {
-            let (ok, out, err) = run_cli(&["run", "pipeline.yaml", "--only", "fit"], d);
-            assert!(ok, "{err}");
-            let (ok, eval, err) = run_cli(&["evaluate", "pipeline.yaml"], d);
-            assert!(ok, "{err}");
-            format!("{out}\n{eval}")
+    let (fit_run, [icp, normals, rho_c, rho_p, halved, doubled, longer]) =
+        std::thread::scope(|s| {
+            let fit_run = s.spawn(|| {
+                let (ok, out, err) = run_cli(&["run", "pipeline.yaml", "--only", "fit"], d);
+                assert!(ok, "{err}");
+                let (ok, eval, err) = run_cli(&["evaluate", "pipeline.yaml"], d);
+                assert!(ok, "{err}");
+                format!("{out}\n{eval}")
+            });
+            let baseline = &baseline;
+            let handles = runs.map(|(params, last)| s.spawn(move || baseline(params, last)));
+            (fit_run.join().unwrap(), handles.map(|h| h.join().unwrap()))
         });
-        let baseline = &baseline;
-        let handles = runs.map(|(params, last)| s.spawn(move || baseline(params, last)));
-        (fit_run.join().unwrap(), handles.map(|h| h.join().unwrap()))
-    });
     eprintln!("{fit_run}");
     // The run's outputs: joints for every frame and bone, finite; a converged fit per frame.
     let rows = hullpose::joints::read(&d.join("output/joints.csv")).unwrap();
@@ -152,34 +158,41 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     )
     .unwrap();
     assert_eq!(diag.len(), 19);
-    // Every tracked frame fitted (the contact frames may end circling in place or at the
-    // round cap after the restarts; their accuracy is asserted below).
+    // Every tracked frame fitted (a contact frame may end at the round cap after the
+    // restarts; its accuracy is asserted below).
     assert!(diag[1..].iter().all(|x| matches!(
         x.1.status,
-        hullpose::fit::FitStatus::Converged
-            | hullpose::fit::FitStatus::Stalled
-            | hullpose::fit::FitStatus::IterationCap
+        hullpose::fit::FitStatus::Converged | hullpose::fit::FitStatus::IterationCap
     )));
     assert!(d.join("cache/fit/000009.ply").is_file());
     assert!(d.join("output/evaluation/joint_error.png").is_file());
     let proposed = errors_cm(d, &rows);
     eprintln!("proposed: {proposed:.2?}");
     eprintln!("icp: {icp:.2?}\nnormals: {normals:.2?}\nrho_c: {rho_c:.2?}\nrho_p: {rho_p:.2?}");
-    eprintln!("proposed, solver direct: {direct:.2?}");
+    eprintln!("proposed, tolerance halved: {halved:.2?}\ndoubled: {doubled:.2?}");
+    eprintln!("proposed, round cap doubled: {longer:.2?}");
     // The paper's Fig. 8: ICP and Ogawara's normal test slip both where the phantom volume
     // forms (t6-t8, t11-t13) and where the lower arms press together (t9-t10); rho_c alone
     // on the phantom frames, rho_p alone on the contact frames.
     let worst = |e: &[f64], frames: &[usize]| frames.iter().map(|&f| e[f]).fold(0.0, f64::max);
     let (phantom, contact) = ([6, 7, 8, 11], [9, 10]);
     let all: Vec<usize> = (0..19).collect();
-    // Within 1 cm on every frame (the paper's result; the README's table).
-    let proposed_worst = worst(&proposed, &all);
-    assert!(proposed_worst <= 1.0, "proposed worst {proposed_worst}");
-    let direct_worst = worst(&direct, &all);
-    assert!(
-        direct_worst <= 1.0,
-        "proposed with solver direct: worst {direct_worst}"
-    );
+    // Within 1 cm on every frame and 0.35 cm on average (the paper's result; the README's
+    // table), also under the neutral changes.
+    for (name, e) in [
+        ("default", &proposed),
+        ("tolerance halved", &halved),
+        ("tolerance doubled", &doubled),
+        ("round cap doubled", &longer),
+    ] {
+        let proposed_worst = worst(e, &all);
+        assert!(
+            proposed_worst <= 1.0,
+            "proposed, {name}: worst {proposed_worst}"
+        );
+        let mean = e.iter().sum::<f64>() / e.len() as f64;
+        assert!(mean <= 0.35, "proposed, {name}: mean {mean:.3} cm: {e:.2?}");
+    }
     assert!(
         worst(&icp, &phantom) > 3.0,
         "icp on phantom frames {icp:.2?}"

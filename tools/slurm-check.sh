@@ -21,7 +21,7 @@ make_copy() {
   mkdir -p "$d"
   cp -r "$REPO/calib" "$REPO/data" "$d/"
   sed 's/^frames: all/frames: 0..5/' "$REPO/pipeline.yaml" > "$d/pipeline.yaml"
-  printf 'fit:\n  max_iterations: 40\n  restarts: false\n' >> "$d/pipeline.yaml"
+  printf 'fit:\n  stop:\n    max_rounds: 40\n  restart:\n    enabled: false\n' >> "$d/pipeline.yaml"
   sed -i 's/^  frame_rate: 25/  frame_rate: 25\n  formats: [bvh]/' "$d/pipeline.yaml"
   grep -q 'formats: \[bvh\]' "$d/pipeline.yaml" || die "could not set export.formats"
   echo "$d"

@@ -38,17 +38,30 @@ pub enum ContactRule {
     RestDistance,
 }
 
-/// rho_c's parameters (metric units).
-#[derive(Debug, Clone, Copy)]
+/// rho_c's parameters (pipeline.yaml key `fit.contact`, metric units).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct ContactParams {
-    /// Sigmoid slope, per metre (paper: 2.0 per cm).
+    /// Sigmoid slope, per metre. Default 200 (the paper's 2.0 per cm).
     pub alpha_c: f64,
-    /// Distance at which rho_c = 0.5, metres (paper: 2.5 cm).
+    /// Distance at which rho_c = 0.5, metres. Default 0.025 (the paper's 2.5 cm).
     pub tau_c: f64,
+    /// Which vertices may be contact partners: `rest_distance` (default) or `adjacent`.
     pub rule: ContactRule,
     /// For [`ContactRule::RestDistance`]: reference-pose distance above which two vertices
-    /// of different parts may be in contact, metres.
+    /// of different parts may be in contact, metres. Default 0.075 (3 tau_c).
     pub rest_distance: f64,
+}
+
+impl Default for ContactParams {
+    fn default() -> Self {
+        ContactParams {
+            alpha_c: 200.0,
+            tau_c: 0.025,
+            rule: ContactRule::RestDistance,
+            rest_distance: 0.075,
+        }
+    }
 }
 
 /// Paper eq. 2.

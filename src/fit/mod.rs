@@ -12,7 +12,6 @@
 
 mod anderson;
 pub mod contact;
-mod hold;
 pub mod kept_nearest;
 mod moments;
 pub mod solve;
@@ -23,7 +22,7 @@ use crate::geometry::TriMesh;
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::skinning::pose_vertices;
 use crate::skeleton::{Pose, PosedBones, Skeleton};
-use contact::{ContactParams, ContactRule, ContactSearch};
+use contact::{ContactParams, ContactSearch};
 use kept_nearest::{MovingPoints, MovingQueries};
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -97,46 +96,32 @@ pub enum Start {
     Previous,
     /// The previous pose moved on by the last frame-to-frame motion (constant velocity:
     /// L_pred = (L_prev L_before⁻¹) L_prev per bone, likewise the root translation); the
-    /// previous pose itself at the first tracked frame. Starting nearer the answer, the
-    /// slowly converging point-to-point rounds stop nearer it too: on the tripod the worst
-    /// frame is 0.86 cm against 0.84 cm from the previous pose, in 1478 rounds against 2333;
-    /// on the humanoid 1.71 cm against 2.29 cm.
+    /// previous pose itself at the first tracked frame. It overshoots where the motion
+    /// turns or stops (the bundled sample's frames 3-4: 8 and 11 cm off from it, 0.3 cm
+    /// from the previous pose); `proposed` tries it as a second start anyway.
     Predicted,
 }
 
-/// How a frame's energy is minimized (method.md "Stage 6", Optimization).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Solver {
-    /// Rounds of (a) pairs and weights, (b) `lm_steps` LM steps on the held pairs, with
-    /// Anderson acceleration of the rounds: the paper's alternation.
-    Alternating,
-    /// One damped Gauss-Newton step per round whose H weighs the pairs' offsets along the
-    /// surface by `tangential_weight` (the held point-to-point H stiffens sliding that the
-    /// re-found pairs allow, so alternation creeps), kept only when the next round's eq. 4
-    /// energy is lower; where no step lowers it, one alternating round. The gradient is
-    /// eq. 4's, so it stops where the alternation does.
-    Direct,
-}
+/// `proposed`'s energy per round: this share of the point-to-point energy plus the rest of
+/// the point-to-plane energy (each pair measured along its plane's normal). Small enough
+/// that the model slides along the surface within one step, large enough to hold what the
+/// planes leave free (a cylinder's axis); BENCHMARKS.md has the tries.
+pub const POINT_SHARE: f64 = 0.03;
 
-/// How the `normals` method pairs a vertex whose nearest vertex on the other surface has a
-/// normal beyond `normal_angle_deg`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum NormalPairs {
-    /// With the nearest vertex whose normal agrees (Ogawara et al.'s correspondence search,
-    /// as the paper's Fig. 12 describes it: a model vertex may pair with a phantom surface
-    /// or, where the touching surfaces are missing, with the far side of the other part,
-    /// whenever their normals agree), searched up to [`COMPATIBLE_SEARCH_LIMIT`].
-    NearestCompatible,
-    /// Not at all: the nearest pair is dropped.
-    Reject,
-}
+/// A model vertex's pair takes its observed partner's tangent plane when their normals'
+/// dot product is above this (45 degrees), its own otherwise (BENCHMARKS.md).
+const PLANE_AGREEMENT: f64 = 0.7;
 
-/// See [`FitParams::stall_rounds`]: rounds whose net joint displacement is below this share
-/// of their summed per-round motion circle in place. Converging or sliding rounds move
-/// mostly one way (net close to the sum).
-pub const STALL_RATIO: f64 = 0.2;
+/// `proposed` stops when eq. 4 has not fallen a thousandth ([`PLATEAU_GAIN`]) below its
+/// lowest value in this many rounds.
+const PLATEAU_ROUNDS: usize = 5;
+const PLATEAU_GAIN: f64 = 1e-3;
+
+/// The baselines' LM steps per round, with the pairs held.
+const BASELINE_LM_STEPS: usize = 3;
+
+/// Rounds remembered by the Anderson acceleration of the baselines' rounds.
+const ANDERSON_DEPTH: usize = 5;
 
 /// The name of a part of the `rho_c` step in [`Fitter::timings`]: [`STEP_PART_PREFIX`]
 /// followed by `$part` (one literal, so the two cannot drift apart).
@@ -164,130 +149,108 @@ pub const COMPATIBLE_SEARCH_LIMIT: f64 = 0.2;
 pub struct FitParams {
     /// `icp`, `normals`, `rho_c`, `rho_p` or `proposed` (default).
     pub method: Method,
-    /// Where a tracked frame starts: `predicted` (default) or `previous` ([`Start`]).
+    /// Where a tracked frame starts: `previous` (default) or `predicted` ([`Start`]).
+    /// `proposed` also fits from the other one and keeps the lower score.
     pub start: Start,
-    /// rho_c's slope, per metre. Default 200 (the paper's 2.0 per cm).
-    pub alpha_c: f64,
-    /// rho_c's mid-point distance, metres. Default 0.025 (the paper's 2.5 cm).
-    pub tau_c: f64,
-    /// Which vertices may be contact partners: `rest_distance` (default) or `adjacent`
-    /// ([`ContactRule`]).
-    pub contact_rule: ContactRule,
-    /// For `rest_distance`: vertices closer than this in the reference pose are never
-    /// contact partners, metres. Default 0.075 (3 tau_c).
-    pub contact_rest_distance: f64,
+    /// rho_c and the contact partners ([`ContactParams`]).
+    pub contact: ContactParams,
     /// For `normals`: pairs whose normals differ by more than this are rejected, degrees.
     /// Default 45.
     pub normal_angle_deg: f64,
-    /// For `normals`: how a vertex whose nearest partner is rejected is paired
-    /// ([`NormalPairs`]). Default `nearest_compatible`.
-    pub normal_pairs: NormalPairs,
-    /// `alternating` or `direct` ([`Solver`]). Default `alternating`.
-    pub solver: Solver,
-    /// For `direct`: the weight of a pair's offset along the surface in the step's H,
-    /// (0, 1]; 1 is the point-to-point H. Default 0.1.
-    pub tangential_weight: f64,
-    /// Rounds of (correspondences, LM steps) per frame at most. Default 120: where parts
-    /// touch or surfaces slide, the rounds wander at a level energy long after the joints
-    /// stop nearing the truth (the tripod's t11 was no nearer it after 400 rounds than
-    /// after 50), so a longer cap buys time, not accuracy (README "Robust articulated
-    /// fitting").
-    pub max_iterations: usize,
-    /// LM steps per round (correspondences held). Default 3.
-    pub lm_steps: usize,
-    /// For `alternating`: the weight of a pair's offset along the surface in the held
-    /// energy the LM steps minimize, (0, 1]; the offset along the model's normal weighs 1.
-    /// Default 1: eq. 4's point-to-point energy. Below 1 the held minimum slides along the
-    /// observed surface within a round, as point-to-plane ICP does, where point-to-point
-    /// rounds slide one partner change at a time: fewer rounds, and the rounds settle where
-    /// this weighted energy stops falling, not eq. 4 (README "fit").
-    pub held_tangential_weight: f64,
     /// Spacing of the observed vertices the energy runs over, metres: each frame's surface
     /// is thinned to one vertex per cube of this size (the vertex nearest the cube's
     /// centre), about the paper's 1 cm triangles. 0 keeps every vertex. Default 0.01.
     pub sample_spacing: f64,
-    /// The same for the model's vertices, metres. Default 0.01 (the paper's setting). A
-    /// coarser model is much cheaper per round (rho_c's cost grows about as the inverse
-    /// fourth power of the spacing: more vertices, each with more partners near it): at
-    /// 0.014 the tripod's fit stage is 2x faster and `proposed` as close, but `icp` no
-    /// longer slips on the phantom frames as in the paper (README "fit").
+    /// The same for the model's vertices, metres. Default 0.01 (the paper's setting).
     pub model_spacing: f64,
-    /// Rounds remembered by the Anderson acceleration of the rounds; 0 turns it off.
-    /// Default 5.
-    pub acceleration: usize,
-    /// A frame has converged when no joint moved more than this in a round, metres.
-    /// Default 0.00001 (point-to-point pairs slide slowly along each other: a looser
-    /// tolerance stops early and the shortfall accumulates over tracked frames, 1.2 cm at
-    /// the tripod's t9 with 0.00005 against 0.8 cm).
-    pub tolerance: f64,
-    /// A frame's rounds also stop (status `stalled`) when, over this many rounds, no joint
-    /// ended farther than a fifth ([`STALL_RATIO`]) of the distance the joints moved in
-    /// them from where it began: the rounds circle in one place instead of converging.
-    /// 0 (the default) turns it off.
-    pub stall_rounds: usize,
+    /// When a frame's rounds stop ([`StopParams`]).
+    pub stop: StopParams,
     /// Frames whose observed surface has fewer vertices than this share of the model's keep
     /// the previous pose (and are flagged). Default 0.05.
     pub min_observed_share: f64,
-    /// When a tracked frame's fit from its start looks lost (its energy above
-    /// `restart_energy_ratio` times the previous frame's, a bone turned beyond
-    /// `restart_turn_deg`, or the iteration cap hit with the score above
-    /// `restart_energy_ratio` times the previous frame's: [`Fitter::lost`]), it is fitted
-    /// again from two other starts (the other of `previous` and `predicted`, and the
-    /// reference pose at the previous root position; either is skipped when it equals a
-    /// start already tried) and the result with the lowest score is kept (eq. 4 weighted by
-    /// rho_p alone, [`FitDiagnostics::score`]). Default true.
-    pub restarts: bool,
-    /// See `restarts`. Default 3.
-    pub restart_energy_ratio: f64,
-    /// A tracked frame's fit also counts as lost (see `restarts`) when some bone's
-    /// head-to-tail direction ends more than this many degrees from its direction both in
-    /// the start pose and in the previous frame's pose: a limb folded back onto itself.
-    /// Default 45 (the humanoid's limbs turn at most 74 degrees between frames, the
-    /// tripod's 11; its right hand folded back 98 to 154 degrees without this check, and at
-    /// t21, resting on the left thigh, it turned 62 degrees from the previous pose but less
-    /// from the start, which a check at 60 let pass: 16 cm off at the tip). A restart only
-    /// adds a candidate that the score judges, so a true turn beyond it costs rounds, not
-    /// accuracy.
-    pub restart_turn_deg: f64,
-    /// Rounds per restart at most (see `restarts`). Default 400: a restart begins farther
-    /// from the answer than the prediction, and with `max_iterations` rounds the humanoid's
-    /// restarts at t22 all ended with the right hand folded back (its tip 29 cm off).
-    pub restart_max_iterations: usize,
-    /// The hold on hidden parts ([`hold::HiddenHold`]): a bone that rho_c hides nearly
-    /// whole (a hand resting on a thigh) is pulled towards the turn about its joint that it
-    /// had in the previous frame, with this share of the weight a fully observed vertex's
-    /// pairs carry. 0 (the default) is the paper's eq. 4 alone; 1 halves the humanoid's
-    /// rounds (README "Robust articulated fitting"). Only methods with rho_c are affected.
-    pub hidden_hold: f64,
+    /// Fits again from other starts when a fit looks lost ([`RestartParams`]).
+    pub restart: RestartParams,
+}
+
+/// When a frame's rounds stop (pipeline.yaml key `fit.stop`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StopParams {
+    /// `proposed` (Gauss-Newton rounds): converged when no joint moved more than this in a
+    /// round, metres. Default 0.0001.
+    pub tolerance: f64,
+    /// `proposed`: rounds per start at most. Default 60.
+    pub max_rounds: usize,
+    /// The baselines (point-to-point rounds, which converge linearly): the same tolerance,
+    /// metres. Default 0.00001.
+    pub baseline_tolerance: f64,
+    /// The baselines: rounds per start at most. Default 120.
+    pub baseline_max_rounds: usize,
+}
+
+impl Default for StopParams {
+    fn default() -> Self {
+        StopParams {
+            tolerance: 0.0001,
+            max_rounds: 60,
+            baseline_tolerance: 0.00001,
+            baseline_max_rounds: 120,
+        }
+    }
+}
+
+/// Restarts of a fit that looks lost (pipeline.yaml key `fit.restart`; [`Fitter::lost`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RestartParams {
+    /// Whether a lost fit is fitted again from the other start and from the reference pose
+    /// at the previous root position, keeping the lowest score. Default true.
+    pub enabled: bool,
+    /// A fit is lost when its energy rose above this times the previous frame's (or hit
+    /// the round cap with its score so risen). Default 3.
+    pub energy_ratio: f64,
+    /// A fit is also lost when a bone's head-to-tail direction ends more than this many
+    /// degrees from its direction both in the start pose and in the previous frame's pose
+    /// (a limb folded back onto itself). Default 45.
+    pub turn_deg: f64,
+    /// Rounds per restart at most, as a multiple of the method's round cap. Default 2.
+    pub rounds_factor: usize,
+}
+
+impl Default for RestartParams {
+    fn default() -> Self {
+        RestartParams {
+            enabled: true,
+            energy_ratio: 3.0,
+            turn_deg: 45.0,
+            rounds_factor: 2,
+        }
+    }
 }
 
 impl Default for FitParams {
     fn default() -> Self {
         FitParams {
             method: Method::Proposed,
-            start: Start::Predicted,
-            alpha_c: 200.0,
-            tau_c: 0.025,
-            contact_rule: ContactRule::RestDistance,
-            contact_rest_distance: 0.075,
+            start: Start::Previous,
+            contact: ContactParams::default(),
             normal_angle_deg: 45.0,
-            normal_pairs: NormalPairs::NearestCompatible,
-            solver: Solver::Alternating,
-            tangential_weight: 0.1,
-            max_iterations: 120,
-            lm_steps: 3,
-            held_tangential_weight: 1.0,
-            acceleration: 5,
             sample_spacing: 0.01,
             model_spacing: 0.01,
-            tolerance: 0.00001,
-            stall_rounds: 0,
+            stop: StopParams::default(),
             min_observed_share: 0.05,
-            restarts: true,
-            restart_energy_ratio: 3.0,
-            restart_turn_deg: 45.0,
-            restart_max_iterations: 400,
-            hidden_hold: 0.0,
+            restart: RestartParams::default(),
+        }
+    }
+}
+
+impl FitParams {
+    /// The tolerance (metres) and round cap of `method`'s rounds.
+    pub fn stopping(&self, method: Method) -> (f64, usize) {
+        if method == Method::Proposed {
+            (self.stop.tolerance, self.stop.max_rounds)
+        } else {
+            (self.stop.baseline_tolerance, self.stop.baseline_max_rounds)
         }
     }
 }
@@ -295,9 +258,10 @@ impl Default for FitParams {
 /// Checks parameters that do not depend on the data.
 pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
     let positive = |v: f64| v > 0.0 && v.is_finite();
-    if !positive(p.alpha_c) || !positive(p.tau_c) || !positive(p.contact_rest_distance) {
+    let c = &p.contact;
+    if !positive(c.alpha_c) || !positive(c.tau_c) || !positive(c.rest_distance) {
         return Err(
-            "fit: alpha_c, tau_c and contact_rest_distance must be positive numbers".into(),
+            "fit.contact: alpha_c, tau_c and rest_distance must be positive numbers".into(),
         );
     }
     if !(p.normal_angle_deg > 0.0 && p.normal_angle_deg <= 180.0) {
@@ -306,17 +270,11 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
             p.normal_angle_deg
         ));
     }
-    for (key, weight) in [
-        ("tangential_weight", p.tangential_weight),
-        ("held_tangential_weight", p.held_tangential_weight),
-    ] {
-        if !(weight > 0.0 && weight <= 1.0) {
-            return Err(format!("fit.{key} must be in (0, 1], got {weight}"));
-        }
-    }
-    if p.max_iterations == 0 || p.lm_steps == 0 || p.restart_max_iterations == 0 {
+    let s = &p.stop;
+    if s.max_rounds == 0 || s.baseline_max_rounds == 0 || p.restart.rounds_factor == 0 {
         return Err(
-            "fit: max_iterations, restart_max_iterations and lm_steps must be at least 1".into(),
+            "fit: stop.max_rounds, stop.baseline_max_rounds and restart.rounds_factor must be at least 1"
+                .into(),
         );
     }
     for (key, spacing) in [
@@ -329,28 +287,27 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
             ));
         }
     }
-    if !positive(p.tolerance) {
+    for (key, tolerance) in [
+        ("tolerance", s.tolerance),
+        ("baseline_tolerance", s.baseline_tolerance),
+    ] {
+        if !positive(tolerance) {
+            return Err(format!(
+                "fit.stop.{key} must be a positive distance in metres, got {tolerance}"
+            ));
+        }
+    }
+    let r = &p.restart;
+    if !(r.energy_ratio.is_finite() && r.energy_ratio >= 1.0) {
         return Err(format!(
-            "fit.tolerance must be a positive distance in metres, got {}",
-            p.tolerance
+            "fit.restart.energy_ratio must be a number >= 1, got {}",
+            r.energy_ratio
         ));
     }
-    if !(p.hidden_hold >= 0.0 && p.hidden_hold.is_finite()) {
+    if !(r.turn_deg > 0.0 && r.turn_deg <= 180.0) {
         return Err(format!(
-            "fit.hidden_hold must be 0 (off) or a positive share, got {}",
-            p.hidden_hold
-        ));
-    }
-    if !(p.restart_energy_ratio.is_finite() && p.restart_energy_ratio >= 1.0) {
-        return Err(format!(
-            "fit.restart_energy_ratio must be a number >= 1, got {}",
-            p.restart_energy_ratio
-        ));
-    }
-    if !(p.restart_turn_deg > 0.0 && p.restart_turn_deg <= 180.0) {
-        return Err(format!(
-            "fit.restart_turn_deg must be in (0, 180] degrees, got {}",
-            p.restart_turn_deg
+            "fit.restart.turn_deg must be in (0, 180] degrees, got {}",
+            r.turn_deg
         ));
     }
     if !(0.0..1.0).contains(&p.min_observed_share) {
@@ -382,10 +339,6 @@ pub enum FitStatus {
     Converged,
     /// Stopped at `max_iterations`.
     IterationCap,
-    /// Stopped when the rounds went back and forth in one place for `stall_rounds` rounds
-    /// without settling (rho_c moves with the pose, so the rounds need not have a fixed
-    /// point).
-    Stalled,
     /// Too little observed surface: the previous pose was kept.
     NoObservation,
 }
@@ -396,7 +349,6 @@ impl FitStatus {
             FitStatus::Reference => "reference",
             FitStatus::Converged => "converged",
             FitStatus::IterationCap => "iteration_cap",
-            FitStatus::Stalled => "stalled",
             FitStatus::NoObservation => "no_observation",
         }
     }
@@ -406,7 +358,6 @@ impl FitStatus {
             FitStatus::Reference,
             FitStatus::Converged,
             FitStatus::IterationCap,
-            FitStatus::Stalled,
             FitStatus::NoObservation,
         ]
         .into_iter()
@@ -423,7 +374,7 @@ pub struct FitDiagnostics {
     /// Accepted LM steps over all rounds.
     pub lm_steps: usize,
     /// Paper eq. 4 at the final pose with the final pairs (weights normalized by R_c R_p,
-    /// m^2), plus the holds on hidden parts when `fit.hidden_hold` is on (normalized alike).
+    /// m^2).
     pub energy: f64,
     /// Weighted root-mean-square pair distance at the end, metres.
     pub rms: f64,
@@ -502,14 +453,10 @@ pub struct RoundRecord {
 /// How a round moved the pose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RoundKind {
-    /// LM steps on the held pairs (`alternating`), or a kept step (`direct`).
+    /// LM steps on the held pairs.
     Step,
-    /// `alternating`: the Anderson extrapolation was kept instead of the step.
+    /// The baselines: the Anderson extrapolation was kept instead of the step.
     Extrapolated,
-    /// `direct`: the step did not lower eq. 4 and the pose stayed.
-    Rejected,
-    /// `direct`: the alternating round at a stall.
-    Held,
 }
 
 impl RoundKind {
@@ -517,8 +464,6 @@ impl RoundKind {
         match self {
             RoundKind::Step => "step",
             RoundKind::Extrapolated => "extrapolated",
-            RoundKind::Rejected => "rejected",
-            RoundKind::Held => "held",
         }
     }
 }
@@ -535,9 +480,6 @@ struct Prepared {
     kept: std::sync::Mutex<(MovingQueries, MovingPoints)>,
     /// Observed vertices before thinning (for the diagnostics).
     observed: usize,
-    /// The pose the holds on hidden parts hold to ([`hold::HiddenHold`]): the previous
-    /// frame's.
-    anchor: Pose,
 }
 
 /// Everything one round's pairs give: the held targets and the energy's bookkeeping.
@@ -551,19 +493,15 @@ struct Round {
     /// R_c R_p.
     normalizer: f64,
     contact_share: f64,
-    /// The holds on hidden parts at this round's pose and rho_c, and their energy there
-    /// (unnormalized, as `weighted_sq`).
-    hold: hold::HiddenHold,
-    hold_energy: f64,
     /// `weighted_sq` and `normalizer` with rho_c taken as 1 (see [`Round::score`]).
     scored_sq: f64,
     score_normalizer: f64,
 }
 
 impl Round {
-    /// Paper eq. 4 with these pairs and weights, plus the holds on hidden parts.
+    /// Paper eq. 4 with these pairs and weights.
     fn energy(&self) -> f64 {
-        (self.weighted_sq + self.hold_energy) / self.normalizer
+        self.weighted_sq / self.normalizer
     }
 
     /// The round's score, comparable between starts and frames, m^2: the method's own
@@ -592,15 +530,7 @@ impl<'a> Fitter<'a> {
             labels: keep.iter().map(|&i| model.labels[i]).collect(),
         };
         let sample_normals = keep.iter().map(|&i| normals[i]).collect();
-        let contact = ContactSearch::new(
-            &sample,
-            ContactParams {
-                alpha_c: params.alpha_c,
-                tau_c: params.tau_c,
-                rule: params.contact_rule,
-                rest_distance: params.contact_rest_distance,
-            },
-        );
+        let contact = ContactSearch::new(&sample, params.contact);
         Fitter {
             model,
             params,
@@ -690,7 +620,7 @@ impl<'a> Fitter<'a> {
         previous_fit: Option<&FitDiagnostics>,
     ) -> FitResult {
         let p = &self.params;
-        let Some(prepared) = self.prepare(obs, previous) else {
+        let Some(prepared) = self.prepare(obs) else {
             return self.unobserved(obs, previous);
         };
         // Apply the last frame-to-frame motion once more: L_pred = (L L_before⁻¹) L.
@@ -707,8 +637,10 @@ impl<'a> Fitter<'a> {
             (Some(pred), Start::Predicted) => (pred.clone(), Some(previous.clone())),
             _ => (previous.clone(), predicted.clone()),
         };
-        let mut best = self.fit_prepared(&prepared, &first, p.max_iterations);
-        if !p.restarts || !self.lost(&best, &first, previous, previous_fit) {
+        let (_, cap) = p.stopping(p.method);
+        let mut best = self.fit_prepared(&prepared, &first, cap);
+        let tried = [first.clone()];
+        if !p.restart.enabled || !self.lost(&best, &first, previous, previous_fit) {
             return best;
         }
         let mut rest = Pose::rest(previous.rotations.len());
@@ -717,21 +649,14 @@ impl<'a> Fitter<'a> {
         // frame after t0 the previous pose is the reference pose itself.
         let mut starts: Vec<Pose> = Vec::new();
         for start in second.into_iter().chain([rest]) {
-            if start != first && !starts.contains(&start) {
+            if !tried.contains(&start) && !starts.contains(&start) {
                 starts.push(start);
             }
         }
-        let (mut rounds, mut steps) = (best.diagnostics.iterations, best.diagnostics.lm_steps);
         for start in &starts {
-            let r = self.fit_prepared(&prepared, start, p.restart_max_iterations);
-            rounds += r.diagnostics.iterations;
-            steps += r.diagnostics.lm_steps;
-            if r.diagnostics.score < best.diagnostics.score {
-                best = r;
-            }
+            let r = self.fit_prepared(&prepared, start, cap * p.restart.rounds_factor);
+            best = better(best, r);
         }
-        best.diagnostics.iterations = rounds;
-        best.diagnostics.lm_steps = steps;
         best
     }
 
@@ -755,12 +680,12 @@ impl<'a> Fitter<'a> {
         let p = &self.params;
         let d = &fit.diagnostics;
         let rose = |now: f64, before: Option<f64>| {
-            before.is_some_and(|b| b > 0.0 && now > p.restart_energy_ratio * b)
+            before.is_some_and(|b| b > 0.0 && now > p.restart.energy_ratio * b)
         };
         let score_known = previous_fit.is_some_and(|f| f.score > 0.0);
         rose(d.energy, previous_fit.map(|f| f.energy))
             || largest_turn_deg(&self.model.skeleton, &fit.pose, start, previous)
-                > p.restart_turn_deg
+                > p.restart.turn_deg
             || (d.status == FitStatus::IterationCap
                 && (!score_known || rose(d.score, previous_fit.map(|f| f.score))))
     }
@@ -774,9 +699,8 @@ impl<'a> Fitter<'a> {
     }
 
     /// The frame's observation as the rounds use it: finite vertices only, thinned to
-    /// `sample_spacing`, with its k-d tree; `None` when too little of it is left. `anchor`:
-    /// the pose the holds on hidden parts hold to.
-    fn prepare(&self, obs: &Observation, anchor: &Pose) -> Option<Prepared> {
+    /// `sample_spacing`, with its k-d tree; `None` when too little of it is left.
+    fn prepare(&self, obs: &Observation) -> Option<Prepared> {
         let p = &self.params;
         let model_vertices = self.model.mesh.vertices.len();
         if obs.vertices.is_empty()
@@ -817,15 +741,16 @@ impl<'a> Fitter<'a> {
             obs,
             tree,
             kept: Default::default(),
-            anchor: anchor.clone(),
         })
     }
 
     /// Fits one frame's `obs` starting from `start`; a frame without enough observation
     /// keeps `start`.
     pub fn fit(&self, obs: &Observation, start: &Pose) -> FitResult {
-        match self.prepare(obs, start) {
-            Some(prepared) => self.fit_prepared(&prepared, start, self.params.max_iterations),
+        match self.prepare(obs) {
+            Some(prepared) => {
+                self.fit_prepared(&prepared, start, self.params.stopping(self.params.method).1)
+            }
             None => self.unobserved(obs, start),
         }
     }
@@ -836,109 +761,32 @@ impl<'a> Fitter<'a> {
         let round = self.round(self.params.method, prepared, start);
         let diagnostics = FitDiagnostics::unfitted(FitStatus::IterationCap, prepared.observed);
         let pose = start.clone();
-        match self.params.solver {
-            Solver::Alternating => self.fit_alternating(prepared, (pose, round, diagnostics), cap),
-            Solver::Direct => self.fit_direct(prepared, (pose, round, diagnostics), cap),
+        let (tolerance, _) = self.params.stopping(self.params.method);
+        if self.params.method == Method::Proposed {
+            self.fit_gauss_newton(prepared, (pose, round, diagnostics), tolerance, cap)
+        } else {
+            self.fit_alternating(prepared, (pose, round, diagnostics), tolerance, cap)
         }
     }
 
-    /// [`Solver::Direct`]: one damped step per round, kept when the round at the new pose
-    /// has a lower eq. 4 energy than the round it started from.
-    fn fit_direct(&self, prepared: &Prepared, from: FitStart, cap: usize) -> FitResult {
+    /// The baselines' rounds (the paper's alternation): (a) pairs and weights, (b)
+    /// [`BASELINE_LM_STEPS`] LM steps on the held point-to-point pairs, with Anderson
+    /// acceleration of the rounds, until no joint moves more than `tolerance`.
+    fn fit_alternating(
+        &self,
+        prepared: &Prepared,
+        from: FitStart,
+        tolerance: f64,
+        cap: usize,
+    ) -> FitResult {
         let (mut pose, mut round, mut diagnostics) = from;
-        let p = &self.params;
+        let method = self.params.method;
         let mut lambda = 1e-3;
-        'rounds: while diagnostics.iterations < cap {
-            let problem = self.held(&round);
-            let system = |tangential: f64| {
-                self.time("lm steps", || problem.normal_equations(&pose, tangential))
-            };
-            let (mut h, mut g, _) = system(p.tangential_weight);
-            let mut point_to_point = false;
-            loop {
-                if diagnostics.iterations >= cap {
-                    break 'rounds;
-                }
-                let Some(delta) = solve::damped_step(&h, &g, lambda) else {
-                    lambda *= 4.0;
-                    continue;
-                };
-                let candidate = pose.apply_increment(delta.as_slice());
-                diagnostics.iterations += 1;
-                let next = self.round(p.method, prepared, &candidate);
-                let moved = joint_motion(self.model, &pose, &candidate);
-                let kept = candidate.is_finite() && next.energy() < round.energy();
-                let kind = if kept {
-                    RoundKind::Step
-                } else {
-                    RoundKind::Rejected
-                };
-                self.record(
-                    diagnostics.iterations,
-                    kind,
-                    moved,
-                    next.energy(),
-                    &candidate,
-                );
-                if kept {
-                    diagnostics.lm_steps += 1;
-                    lambda = (lambda / 3.0).max(1e-9);
-                    pose = candidate;
-                    round = next;
-                    if moved < p.tolerance {
-                        diagnostics.status = FitStatus::Converged;
-                        break 'rounds;
-                    }
-                    break;
-                }
-                if !point_to_point {
-                    // Where re-found pairs do not follow the surface (edges, contact), fall
-                    // back to the point-to-point H of the held pairs for this round.
-                    (h, g, _) = system(1.0);
-                    point_to_point = true;
-                    continue;
-                }
-                lambda *= 4.0;
-                if moved < p.tolerance {
-                    // No step as small as the tolerance lowers the energy with re-found
-                    // pairs; rho_c and the pairs change with the pose, so that can be a
-                    // stall short of the minimum. One alternating round (LM steps on the
-                    // held pairs, kept unconditionally) decides: it moves on, or it too
-                    // stays within the tolerance and the frame has converged.
-                    let mut held_lambda = 1e-3;
-                    let (stepped, report) = self.time("lm steps", || {
-                        solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut held_lambda)
-                    });
-                    diagnostics.iterations += 1;
-                    diagnostics.lm_steps += report.steps;
-                    let moved = joint_motion(self.model, &pose, &stepped);
-                    pose = stepped;
-                    round = self.round(p.method, prepared, &pose);
-                    let n = diagnostics.iterations;
-                    self.record(n, RoundKind::Held, moved, round.energy(), &pose);
-                    lambda = 1e-3;
-                    if moved >= p.tolerance {
-                        break;
-                    }
-                    diagnostics.status = FitStatus::Converged;
-                    break 'rounds;
-                }
-            }
-        }
-        finish(pose, &round, diagnostics)
-    }
-
-    /// [`Solver::Alternating`].
-    fn fit_alternating(&self, prepared: &Prepared, from: FitStart, cap: usize) -> FitResult {
-        let (mut pose, mut round, mut diagnostics) = from;
-        let p = &self.params;
-        let mut lambda = 1e-3;
-        let mut accel = anderson::Anderson::new(p.acceleration);
-        let mut stall = StallWatch::new(p.stall_rounds, joints_of(self.model, &pose));
+        let mut accel = anderson::Anderson::new(ANDERSON_DEPTH);
         while diagnostics.iterations < cap {
             let (stepped, report) = self.time("lm steps", || {
-                let problem = self.held(&round).with_tangential(p.held_tangential_weight);
-                solve::levenberg_marquardt(&problem, &pose, p.lm_steps, &mut lambda)
+                let problem = self.held(&round);
+                solve::levenberg_marquardt(&problem, &pose, BASELINE_LM_STEPS, &mut lambda)
             });
             diagnostics.iterations += 1;
             diagnostics.lm_steps += report.steps;
@@ -950,7 +798,7 @@ impl<'a> Fitter<'a> {
             if let Some(extrapolated) = accel.next(&pose.to_vector(), &stepped.to_vector()) {
                 let candidate = Pose::from_vector(&extrapolated);
                 if candidate.is_finite() {
-                    let r = self.round(p.method, prepared, &candidate);
+                    let r = self.round(method, prepared, &candidate);
                     if r.energy() < round.energy() {
                         next = candidate;
                         next_round = Some(r);
@@ -964,22 +812,72 @@ impl<'a> Fitter<'a> {
             } else {
                 RoundKind::Step
             };
-            let next_round = next_round.unwrap_or_else(|| self.round(p.method, prepared, &next));
-            let moved = stall.push(joints_of(self.model, &next));
+            let next_round = next_round.unwrap_or_else(|| self.round(method, prepared, &next));
+            let moved = joint_motion(self.model, &pose, &next);
             let n = diagnostics.iterations;
             self.record(n, kind, moved, next_round.energy(), &next);
             pose = next;
             round = next_round;
-            if moved < p.tolerance {
+            if moved < tolerance {
                 diagnostics.status = FitStatus::Converged;
-                break;
-            }
-            if stall.stalled() {
-                diagnostics.status = FitStatus::Stalled;
                 break;
             }
         }
         // The energy and shares at the final pose, with its own pairs.
+        finish(pose, &round, diagnostics)
+    }
+
+    /// `proposed`'s rounds: (a) pairs, weights and each pair's plane at the current pose,
+    /// (b) one Levenberg-Marquardt step on the point-to-plane energy of those pairs
+    /// ([`POINT_SHARE`], [`solve::HeldProblem::with_tangential`]): Gauss-Newton on a
+    /// linearisation that lets the model slide along the observed surface, so a frame
+    /// settles in about ten rounds where point-to-point rounds take hundreds. Stops when no
+    /// joint moved more than `tolerance`, or when eq. 4 has not fallen below its lowest
+    /// value by a thousandth for [`PLATEAU_ROUNDS`] rounds (the pairs and rho_c change
+    /// with the pose, so the rounds may circle within a millimetre instead of converging);
+    /// ends at the round with the lowest eq. 4.
+    fn fit_gauss_newton(
+        &self,
+        prepared: &Prepared,
+        from: FitStart,
+        tolerance: f64,
+        cap: usize,
+    ) -> FitResult {
+        let (mut pose, mut round, mut diagnostics) = from;
+        let method = self.params.method;
+        let mut lambda = 1e-3;
+        let (mut best_pose, mut best_energy) = (pose.clone(), round.energy());
+        let mut since_best = 0;
+        while diagnostics.iterations < cap {
+            let (stepped, report) = self.time("lm steps", || {
+                let problem = self.held(&round).with_tangential(POINT_SHARE);
+                solve::levenberg_marquardt(&problem, &pose, 1, &mut lambda)
+            });
+            diagnostics.iterations += 1;
+            diagnostics.lm_steps += report.steps;
+            let next_round = self.round(method, prepared, &stepped);
+            let moved = joint_motion(self.model, &pose, &stepped);
+            let n = diagnostics.iterations;
+            self.record(n, RoundKind::Step, moved, next_round.energy(), &stepped);
+            pose = stepped;
+            round = next_round;
+            let energy = round.energy();
+            since_best += 1;
+            if energy < best_energy * (1.0 - PLATEAU_GAIN) {
+                since_best = 0;
+            }
+            if energy < best_energy {
+                (best_pose, best_energy) = (pose.clone(), energy);
+            }
+            if moved < tolerance || since_best >= PLATEAU_ROUNDS {
+                diagnostics.status = FitStatus::Converged;
+                break;
+            }
+        }
+        if best_pose != pose {
+            round = self.round(method, prepared, &best_pose);
+            pose = best_pose;
+        }
         finish(pose, &round, diagnostics)
     }
 
@@ -991,7 +889,6 @@ impl<'a> Fitter<'a> {
             &self.sample.weights,
             &round.targets,
         )
-        .with_hold(&round.hold)
     }
 
     /// Step (a): pose the model, its normals and rho_c, pairs both ways and their weights.
@@ -999,7 +896,7 @@ impl<'a> Fitter<'a> {
         let p = &self.params;
         let (obs, obs_tree) = (&prepared.obs, &prepared.tree);
         let m = &self.sample;
-        let (bones, posed, normals) = self.time("pose, normals", || {
+        let (posed, normals) = self.time("pose, normals", || {
             let bones = PosedBones::new(&m.skeleton, pose);
             let posed = pose_vertices(&bones, &m.mesh.vertices, &m.weights);
             // A normal turns with its vertex's dominant bone.
@@ -1009,7 +906,7 @@ impl<'a> Fitter<'a> {
                 .zip(&m.labels)
                 .map(|(n, &l)| bones.rotations[l] * n)
                 .collect();
-            (bones, posed, normals)
+            (posed, normals)
         });
         let find_rho_c = || {
             if method.uses_rho_c() {
@@ -1024,9 +921,11 @@ impl<'a> Fitter<'a> {
             }
         };
         let cos_limit = p.normal_angle_deg.to_radians().cos();
-        // `normals` with `nearest_compatible`: the nearest vertex whose normal agrees.
-        let compatible =
-            method == Method::Normals && p.normal_pairs == NormalPairs::NearestCompatible;
+        // `normals` (Ogawara et al.'s correspondence search, as the paper's Fig. 12 describes
+        // it): the nearest vertex whose normal agrees, searched up to
+        // [`COMPATIBLE_SEARCH_LIMIT`]; a model vertex may so pair with a phantom surface or,
+        // where the touching surfaces are missing, with the far side of the other part.
+        let compatible = method == Method::Normals;
         let agree = |v: usize, u: usize| normals[v].dot(&obs.normals[u]) >= cos_limit;
         // With `compatible`, each query point's nearest partner in `tree` whose normal agrees
         // (`agrees(query, partner)`); (0, inf) for none.
@@ -1150,7 +1049,7 @@ impl<'a> Fitter<'a> {
             // The sums over all pairs, serially in the pairs' order (forward, then
             // backward): the same bits on every run.
             let (mut weighted_sq, mut weight_sum, mut downweighted) = (0.0, 0.0, 0usize);
-            let (mut scored_sq, mut scored_weight) = (0.0, 0.0);
+            let mut scored_sq = 0.0;
             let pairs = forward
                 .iter()
                 .zip(&forward_weights)
@@ -1165,7 +1064,6 @@ impl<'a> Fitter<'a> {
                 }
                 if ws > 0.0 {
                     scored_sq += ws * d2;
-                    scored_weight += ws;
                 }
             }
             // Each model vertex's pulls: its own pair, then the observed vertices whose
@@ -1211,7 +1109,38 @@ impl<'a> Fitter<'a> {
                 .iter()
                 .map(|&v| (v as u32, w_sum[v], target[v] / w_sum[v]))
                 .collect();
-            let pull_normals = pulled.iter().map(|&v| normals[v]).collect();
+            // Each pair as a plane: a model vertex's own pair through its observed partner's
+            // tangent plane, an observed vertex's pair through its model partner's.
+            let planes = if method == Method::Proposed {
+                // A model vertex's own pair: its partner's tangent plane where the two
+                // normals agree, its own where they do not (a phantom surface, or the far
+                // side of another part); an observed vertex's pair: its partner's.
+                let observed_normal = |v: usize, u: usize| {
+                    if normals[v].dot(&obs.normals[u]) > PLANE_AGREEMENT {
+                        obs.normals[u]
+                    } else {
+                        normals[v]
+                    }
+                };
+                let plane = |v: usize, u: usize, weight: f64, normal: Vector3<f64>| solve::Plane {
+                    vertex: v as u32,
+                    weight,
+                    point: obs.vertices[u],
+                    normal,
+                };
+                let own = forward.iter().zip(&forward_weights).enumerate();
+                let theirs = backward.iter().zip(&backward_weights).enumerate();
+                own.filter(|(_, (_, &(w, _)))| pulls_on(w))
+                    .map(|(v, (&(u, _), &(w, _)))| plane(v, u, w, observed_normal(v, u)))
+                    .chain(
+                        theirs
+                            .filter(|(_, (_, &(w, _)))| pulls_on(w))
+                            .map(|(u, (&(v, _), &(w, _)))| plane(v, u, w, normals[v])),
+                    )
+                    .collect()
+            } else {
+                Vec::new()
+            };
             let r_c: f64 = rho_c.iter().sum();
             let r_p: f64 = if method.uses_rho_p() {
                 obs.rho_p.iter().sum()
@@ -1224,30 +1153,8 @@ impl<'a> Fitter<'a> {
                     Method::Proposed | Method::RhoP => obs.rho_p.iter().sum(),
                     _ => n_obs,
                 };
-            // A fully observed vertex's pairs weigh, on average, the pairs' weights without
-            // rho_c per model vertex: the holds' unit.
-            let hold = if p.hidden_hold > 0.0 && method.uses_rho_c() {
-                let scale = p.hidden_hold * scored_weight / n.max(1) as f64;
-                hold::HiddenHold::new(
-                    &m.skeleton,
-                    &bones,
-                    &posed,
-                    &m.weights,
-                    &rho_c,
-                    scale,
-                    &prepared.anchor,
-                )
-            } else {
-                hold::HiddenHold::default()
-            };
-            let hold_energy = hold.energy(pose);
             Round {
-                hold,
-                hold_energy,
-                targets: Targets {
-                    pulls,
-                    normals: pull_normals,
-                },
+                targets: Targets { pulls, planes },
                 weighted_sq,
                 weight_sum,
                 pairs: forward.len() + backward.len(),
@@ -1297,53 +1204,29 @@ fn joints_of(model: &BodyModel, pose: &Pose) -> Vec<Vector3<f64>> {
         .collect()
 }
 
-/// The joints of the last rounds, to tell rounds that circle in place
-/// ([`FitParams::stall_rounds`]).
-struct StallWatch {
-    rounds: usize,
-    /// The joints before each of the last `rounds` rounds and after the latest, with the
-    /// largest joint motion of each round (metres; none for the first entry).
-    history: std::collections::VecDeque<(Vec<Vector3<f64>>, f64)>,
-}
-
-impl StallWatch {
-    fn new(rounds: usize, joints: Vec<Vector3<f64>>) -> StallWatch {
-        StallWatch {
-            rounds,
-            history: std::collections::VecDeque::from([(joints, 0.0)]),
-        }
-    }
-
-    /// Records the joints after a round; returns the round's largest joint motion, metres.
-    fn push(&mut self, joints: Vec<Vector3<f64>>) -> f64 {
-        let last = &self.history.back().expect("never empty").0;
-        let moved = largest_distance(last, &joints);
-        self.history.push_back((joints, moved));
-        if self.history.len() > self.rounds + 1 {
-            self.history.pop_front();
-        }
-        moved
-    }
-
-    /// Whether the last `rounds` rounds ended nearer than [`STALL_RATIO`] of their summed
-    /// motion to where they began.
-    fn stalled(&self) -> bool {
-        if self.rounds == 0 || self.history.len() <= self.rounds {
-            return false;
-        }
-        let first = &self.history.front().expect("never empty").0;
-        let last = &self.history.back().expect("never empty").0;
-        let travelled: f64 = self.history.iter().skip(1).map(|h| h.1).sum();
-        largest_distance(first, last) < STALL_RATIO * travelled
-    }
-}
-
 /// The largest distance between corresponding points, metres.
 fn largest_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.iter()
         .zip(b)
         .map(|(x, y)| (x - y).norm())
         .fold(0.0, f64::max)
+}
+
+/// The fit with the lower score ([`FitDiagnostics::score`]), with the rounds and steps of
+/// both.
+fn better(a: FitResult, b: FitResult) -> FitResult {
+    let (rounds, steps) = (
+        a.diagnostics.iterations + b.diagnostics.iterations,
+        a.diagnostics.lm_steps + b.diagnostics.lm_steps,
+    );
+    let mut best = if b.diagnostics.score < a.diagnostics.score {
+        b
+    } else {
+        a
+    };
+    best.diagnostics.iterations = rounds;
+    best.diagnostics.lm_steps = steps;
+    best
 }
 
 /// Where a solver starts: the pose, its round (pairs, weights) and the diagnostics so far.
@@ -1378,26 +1261,6 @@ mod tests {
     use super::*;
     use crate::skeleton::skinning::tests::chain;
     use nalgebra::Rotation3;
-
-    /// Rounds that go back and forth stall; rounds that slide one way, however slowly, or
-    /// that are fewer than the window, do not; 0 rounds never stalls.
-    #[test]
-    fn stall_watch_tells_circling_from_sliding() {
-        let point = |x: f64| vec![Vector3::new(x, 0.0, 0.0)];
-        let mut circling = StallWatch::new(20, point(0.0));
-        let mut sliding = StallWatch::new(20, point(0.0));
-        let mut off = StallWatch::new(0, point(0.0));
-        for k in 1..=40 {
-            // 0.5 mm steps to and fro, drifting 1 um per round.
-            let to_and_fro = if k % 2 == 1 { 0.0005 } else { 0.0 } + 1e-6 * k as f64;
-            let moved = circling.push(point(to_and_fro));
-            assert!(moved > 0.0004 && moved < 0.0006);
-            sliding.push(point(1e-5 * k as f64));
-            off.push(point(to_and_fro));
-            assert_eq!(circling.stalled(), k >= 20, "round {k}");
-            assert!(!sliding.stalled() && !off.stalled(), "round {k}");
-        }
-    }
 
     /// A bone folded back is measured from the nearer of the two reference poses; turning a
     /// parent turns its child's direction too, and a root translation turns nothing.

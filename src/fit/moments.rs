@@ -160,8 +160,8 @@ impl RigidMoments {
 }
 
 /// The held energy's part along the pulls' normals, sum W (n . (y - c))^2, of one bone's
-/// rigidly attached pulls, in closed form (for `fit.held_tangential_weight` below 1, the
-/// normals held at the round's pose).
+/// rigidly attached planes (each pair with its plane's normal), in closed form (for
+/// `proposed`'s point-to-plane rounds).
 ///
 /// With z = G x~ and rho = y_mean - c_mean as in [`RigidMoments`], each pull's residual is
 /// linear in theta = (G row by row, rho): n . (y - c) = f . theta - gamma, with

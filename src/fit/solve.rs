@@ -8,7 +8,6 @@
 //! weight W_v times the squared distance to their weighted mean c_v. So each model vertex
 //! contributes one 3-row residual, with the analytic Jacobian of linear blend skinning.
 
-use super::hold::HiddenHold;
 use super::moments::{PlaneMoments, RigidMoments};
 use crate::skeleton::skinning::{pose_vertex, sparse_vertex_jacobian, Influences};
 use crate::skeleton::{Pose, PosedBones, Skeleton};
@@ -23,8 +22,20 @@ const CHUNK: usize = 2048;
 pub struct Targets {
     /// (model vertex, W_v, c_v).
     pub pulls: Vec<(u32, f64, Vector3<f64>)>,
-    /// The posed model's unit normal at each pull's vertex (same order as `pulls`).
-    pub normals: Vec<Vector3<f64>>,
+    /// Every weighted pair as a plane (for the point-to-plane energy,
+    /// [`HeldProblem::with_tangential`]); empty when only the point-to-point energy is used.
+    pub planes: Vec<Plane>,
+}
+
+/// One pair seen from its model vertex: the vertex is pulled towards the plane through
+/// `point` with unit normal `normal`, with `weight` (the pair's weight in eq. 4).
+#[derive(Debug, Clone, Copy)]
+pub struct Plane {
+    pub vertex: u32,
+    pub weight: f64,
+    /// Metres.
+    pub point: Vector3<f64>,
+    pub normal: Vector3<f64>,
 }
 
 /// The held problem: model, targets.
@@ -34,20 +45,26 @@ pub struct HeldProblem<'a> {
     rest: &'a [Vector3<f64>],
     weights: &'a [Influences],
     targets: &'a Targets,
-    /// Indices (into `targets.pulls`) of the pulls of vertices that move with one bone,
-    /// per bone.
-    rigid_pulls: Vec<Vec<u32>>,
-    /// Those pulls summed per bone ([`RigidMoments`]).
+    /// The pulls of vertices that move with one bone, summed per bone ([`RigidMoments`]).
     rigid: Vec<RigidMoments>,
     /// Indices (into `targets.pulls`) of the blended vertices, summed one by one.
     blended: Vec<u32>,
-    /// The held energy's weight of a residual's part along the surface (see
+    /// The held energy's share of the point-to-point terms (see
     /// [`HeldProblem::with_tangential`]); 1: eq. 4's point-to-point energy.
     tangential: f64,
-    /// With `tangential` below 1, the rigid pulls' parts along their normals, per bone.
-    plane: Vec<PlaneMoments>,
-    /// The holds on hidden parts, added to the energy ([`HeldProblem::with_hold`]).
-    hold: Option<&'a HiddenHold>,
+    /// With `tangential` below 1, the planes of rigidly attached vertices, per bone.
+    plane_rigid: Vec<PlaneMoments>,
+    /// With `tangential` below 1, indices (into `targets.planes`) of the blended vertices'
+    /// planes, summed one by one.
+    plane_blended: Vec<u32>,
+}
+
+/// Whether a vertex with these influences moves with one bone only (and which).
+fn rigid_bone(influences: &Influences) -> Option<usize> {
+    match influences.as_slice() {
+        [(b, w)] if *w == 1.0 => Some(*b),
+        _ => None,
+    }
 }
 
 impl<'a> HeldProblem<'a> {
@@ -62,9 +79,9 @@ impl<'a> HeldProblem<'a> {
         let mut per_bone: Vec<Vec<u32>> = vec![Vec::new(); skeleton.bones.len()];
         let mut blended = Vec::new();
         for (i, &(v, _, _)) in pulls.iter().enumerate() {
-            match weights[v as usize].as_slice() {
-                [(b, w)] if *w == 1.0 => per_bone[*b].push(i as u32),
-                _ => blended.push(i as u32),
+            match rigid_bone(&weights[v as usize]) {
+                Some(b) => per_bone[b].push(i as u32),
+                None => blended.push(i as u32),
             }
         }
         // Bone by bone in parallel; each bone's sums run in order (the same bits).
@@ -84,68 +101,51 @@ impl<'a> HeldProblem<'a> {
             rest,
             weights,
             targets,
-            rigid_pulls: per_bone,
             rigid,
             blended,
             tangential: 1.0,
-            plane: Vec::new(),
-            hold: None,
+            plane_rigid: Vec::new(),
+            plane_blended: Vec::new(),
         }
     }
 
-    /// The held problem with the round's holds on hidden parts added to its energy
-    /// (`fit.hidden_hold`, [`HiddenHold`]).
-    pub fn with_hold(mut self, hold: &'a HiddenHold) -> HeldProblem<'a> {
-        self.hold = (!hold.is_empty()).then_some(hold);
-        self
-    }
-
-    /// The holds' energy at `pose` (0 without holds).
-    fn hold_energy(&self, pose: &Pose) -> f64 {
-        self.hold.map_or(0.0, |h| h.energy(pose))
-    }
-
-    /// The held problem whose energy weighs each pull's residual r by
-    /// M = n n^T + `tangential` (I - n n^T) (n the pull's normal, held at the round's pose):
-    /// the part along the surface by `tangential` in (0, 1], the part along the normal
-    /// fully. Below 1 the held minimum lets the model slide along the observed surface
-    /// within one round, which the point-to-point rounds do one partner change at a time
-    /// (`fit.held_tangential_weight`).
+    /// The held problem whose energy is `tangential` times the point-to-point energy plus
+    /// `1 - tangential` times the point-to-plane energy of `targets.planes`,
+    /// sum w (n . (y - point))^2: each pair measured along its plane's normal, so that the
+    /// model slides along the other surface within one step (point-to-plane ICP), where
+    /// point-to-point rounds slide one partner change at a time.
     pub fn with_tangential(mut self, tangential: f64) -> HeldProblem<'a> {
         self.tangential = tangential;
         if tangential < 1.0 {
-            let (pulls, normals, rest) = (&self.targets.pulls, &self.targets.normals, self.rest);
-            self.plane = self
-                .rigid_pulls
+            let planes = &self.targets.planes;
+            let mut per_bone: Vec<Vec<u32>> = vec![Vec::new(); self.skeleton.bones.len()];
+            self.plane_blended.clear();
+            for (i, plane) in planes.iter().enumerate() {
+                match rigid_bone(&self.weights[plane.vertex as usize]) {
+                    Some(b) => per_bone[b].push(i as u32),
+                    None => self.plane_blended.push(i as u32),
+                }
+            }
+            let rest = self.rest;
+            self.plane_rigid = per_bone
                 .par_iter()
                 .enumerate()
                 .filter_map(|(b, mine)| {
-                    let pulls = mine.iter().map(|&i| {
-                        let (v, w, c) = pulls[i as usize];
-                        (rest[v as usize], w, c, normals[i as usize])
+                    let planes = mine.iter().map(|&i| {
+                        let q = planes[i as usize];
+                        (rest[q.vertex as usize], q.weight, q.point, q.normal)
                     });
-                    PlaneMoments::new(b, pulls)
+                    PlaneMoments::new(b, planes)
                 })
                 .collect();
         }
         self
     }
 
-    /// The Gauss-Newton system of the held energy itself (see
-    /// [`HeldProblem::with_tangential`]): H, g and the energy all weigh residuals by M.
-    pub fn held_equations(&self, pose: &Pose) -> (DMatrix<f64>, DVector<f64>, f64) {
-        if self.tangential < 1.0 {
-            self.summed(pose, self.tangential, &self.blended, &self.rigid, true)
-        } else {
-            self.normal_equations(pose, 1.0)
-        }
-    }
-
-    /// sum_v W_v |v(p) - c_v|^2 (m^2); with [`HeldProblem::with_tangential`] below 1,
-    /// sum_v W_v r^T M r for r = v(p) - c_v.
+    /// sum_v W_v |v(p) - c_v|^2 (m^2), blended with the point-to-plane energy as
+    /// [`HeldProblem::with_tangential`] says.
     pub fn energy(&self, pose: &Pose) -> f64 {
         let bones = PosedBones::new(self.skeleton, pose);
-        let t = self.tangential;
         // Fixed chunks summed in order: the same bits on every run and thread count.
         let partial: Vec<f64> = self
             .blended
@@ -157,133 +157,140 @@ impl<'a> HeldProblem<'a> {
                         let (v, w, c) = self.targets.pulls[i as usize];
                         let v = v as usize;
                         let r = pose_vertex(&bones, &self.rest[v], &self.weights[v]) - c;
-                        if t < 1.0 {
-                            let along = self.targets.normals[i as usize].dot(&r);
-                            w * (t * r.norm_squared() + (1.0 - t) * along * along)
-                        } else {
-                            w * r.norm_squared()
-                        }
+                        w * r.norm_squared()
                     })
                     .sum::<f64>()
             })
             .collect();
         let rigid = self.rigid.iter().map(|m| m.energy(&bones)).sum::<f64>();
-        let held = if t < 1.0 {
-            let plane = self.plane.iter().map(|m| m.energy(&bones)).sum::<f64>();
-            partial.iter().sum::<f64>() + t * rigid + (1.0 - t) * plane
-        } else {
-            partial.iter().sum::<f64>() + rigid
-        };
-        held + self.hold_energy(pose)
-    }
-
-    /// The Gauss-Newton system at `pose`: H = sum W J^T M J, g = sum W J^T r, and the
-    /// energy, where M = n n^T + `tangential` (I - n n^T) weighs a residual's part along the
-    /// vertex normal n fully and its part along the surface by `tangential` (1: the
-    /// point-to-point H of the held energy; below 1 it approaches the curvature of the
-    /// distance to the observed surface, along which nearest neighbours slide).
-    pub fn normal_equations(
-        &self,
-        pose: &Pose,
-        tangential: f64,
-    ) -> (DMatrix<f64>, DVector<f64>, f64) {
-        if tangential < 1.0 {
-            // The tangential H needs each vertex's normal: every pull one by one.
-            return self.summed(pose, tangential, &self.every_pull(), &[], false);
+        let mut held = partial.iter().sum::<f64>() + rigid;
+        let t = self.tangential;
+        if t < 1.0 {
+            held = t * held + (1.0 - t) * self.plane_energy(&bones);
         }
-        self.summed(pose, 1.0, &self.blended, &self.rigid, false)
+        held
     }
 
-    /// Indices of every pull.
-    fn every_pull(&self) -> Vec<u32> {
-        (0..self.targets.pulls.len() as u32).collect()
+    /// sum w (n . (y - point))^2 over the planes, m^2.
+    fn plane_energy(&self, bones: &PosedBones) -> f64 {
+        let blended: f64 = self
+            .plane_blended
+            .iter()
+            .map(|&i| {
+                let q = self.targets.planes[i as usize];
+                let v = q.vertex as usize;
+                let y = pose_vertex(bones, &self.rest[v], &self.weights[v]);
+                q.weight * q.normal.dot(&(y - q.point)).powi(2)
+            })
+            .sum();
+        blended
+            + self
+                .plane_rigid
+                .iter()
+                .map(|m| m.energy(bones))
+                .sum::<f64>()
     }
 
-    /// The normal equations of the pulls `each` summed vertex by vertex and of `rigid` in
-    /// closed form. `weighted`: the residuals, and so g and the energy, are weighed by M
-    /// too (the held energy of [`HeldProblem::with_tangential`]; `rigid` then counts
-    /// `tangential` times, and [`HeldProblem::plane`] the rest); otherwise only H is.
-    fn summed(
-        &self,
-        pose: &Pose,
-        tangential: f64,
-        each: &[u32],
-        rigid: &[RigidMoments],
-        weighted: bool,
-    ) -> (DMatrix<f64>, DVector<f64>, f64) {
+    /// The Gauss-Newton system of the held energy at `pose`: H, g and the energy.
+    pub fn held_equations(&self, pose: &Pose) -> (DMatrix<f64>, DVector<f64>, f64) {
         let bones = PosedBones::new(self.skeleton, pose);
-        let n = pose.parameter_count();
+        let (mut h, mut g, mut e) = self.point_equations(&bones, pose.parameter_count());
+        let t = self.tangential;
+        if t < 1.0 {
+            h *= t;
+            g *= t;
+            e *= t;
+            let n = g.len();
+            let (mut hp, mut gp) = (vec![0.0; n * n], vec![0.0; n]);
+            let ep = self.add_plane_equations(&bones, &mut hp, &mut gp);
+            h += (1.0 - t) * DMatrix::from_row_slice(n, n, &hp);
+            g += (1.0 - t) * DVector::from_vec(gp);
+            e += (1.0 - t) * ep;
+        }
+        (h, g, e)
+    }
+
+    /// Adds the planes' Gauss-Newton terms to `h` (n x n, row-major, both triangles) and
+    /// `g`; returns their energy.
+    fn add_plane_equations(&self, bones: &PosedBones, h: &mut [f64], g: &mut [f64]) -> f64 {
+        let n = g.len();
+        let mut e = 0.0;
+        let mut blocks = Vec::new();
+        let mut cols: Vec<(usize, f64)> = Vec::new();
+        for &i in &self.plane_blended {
+            let q = self.targets.planes[i as usize];
+            let v = q.vertex as usize;
+            let y = sparse_vertex_jacobian(bones, &self.rest[v], &self.weights[v], &mut blocks);
+            let r = q.normal.dot(&(y - q.point));
+            e += q.weight * r * r;
+            // The residual's derivative along each column: n . column.
+            cols.clear();
+            cols.extend((0..3).map(|k| (k, q.normal[k])));
+            for (b, c3) in &blocks {
+                for (k, col) in c3.iter().enumerate() {
+                    cols.push((3 + 3 * b + k, q.normal.dot(col)));
+                }
+            }
+            for &(pi, ai) in &cols {
+                g[pi] += q.weight * ai * r;
+                for &(pj, aj) in &cols {
+                    h[pi * n + pj] += q.weight * ai * aj;
+                }
+            }
+        }
+        for m in &self.plane_rigid {
+            m.add_normal_equations(bones, 1.0, h, g);
+            e += m.energy(bones);
+        }
+        e
+    }
+
+    /// The point-to-point Gauss-Newton system at `bones`: H = sum W J^T J, g = sum W J^T r,
+    /// and the energy; blended vertices summed one by one, the rigid ones in closed form.
+    fn point_equations(&self, bones: &PosedBones, n: usize) -> (DMatrix<f64>, DVector<f64>, f64) {
         let zero = || Accumulator {
             h: vec![0.0; n * n],
             g: vec![0.0; n],
             e: 0.0,
             blocks: Vec::new(),
             cols: Vec::new(),
-            along: Vec::new(),
         };
         // Per fixed chunk, then summed in order (deterministic, see `energy`).
-        let partials: Vec<Accumulator> = each
+        let partials: Vec<Accumulator> = self
+            .blended
             .par_chunks(CHUNK)
             .map(|chunk| {
                 chunk.iter().fold(zero(), |mut acc, &pull| {
                     let (v, w, c) = self.targets.pulls[pull as usize];
                     let v = v as usize;
                     let y = sparse_vertex_jacobian(
-                        &bones,
+                        bones,
                         &self.rest[v],
                         &self.weights[v],
                         &mut acc.blocks,
                     );
-                    let mut r = y - c;
-                    if weighted {
-                        // r^T M r, and M r in place of r in g.
-                        let normal = self.targets.normals[pull as usize];
-                        let along = normal.dot(&r);
-                        let t = tangential;
-                        acc.e += w * (t * r.norm_squared() + (1.0 - t) * along * along);
-                        r = t * r + (1.0 - t) * along * normal;
-                    } else {
-                        acc.e += w * r.norm_squared();
-                    }
-                    // Columns: the translation's identity, then each block's three.
+                    let r = y - c;
+                    acc.e += w * r.norm_squared();
                     acc.cols.clear();
-                    for k in 0..3 {
-                        acc.cols.push((k, Vector3::ith(k, 1.0)));
-                    }
                     for (b, c3) in &acc.blocks {
                         for (k, col) in c3.iter().enumerate() {
                             acc.cols.push((3 + 3 * b + k, *col));
                         }
                     }
-                    // Below 1, ci^T M cj = t ci.cj + (1 - t)(n.ci)(n.cj); at 1, M = I.
-                    let t = tangential;
-                    acc.along.clear();
-                    let mut first = 0;
-                    if t < 1.0 {
-                        let normal = self.targets.normals[pull as usize];
-                        acc.along
-                            .extend(acc.cols.iter().map(|(_, col)| normal.dot(col)));
-                    } else {
-                        // At 1 a translation column's dot product with a column is that
-                        // column's entry (the other two products are zeros, exactly), so
-                        // its row is filled without them: the same sums, bit for bit.
-                        for k in 0..3 {
-                            acc.g[k] += w * r[k];
-                            acc.h[k * n + k] += w;
-                            for (pj, cj) in &acc.cols[3..] {
-                                acc.h[k * n + pj] += w * cj[k];
-                            }
+                    // A translation column's dot product with a column is that column's
+                    // entry (the other two products are zeros, exactly), so its row is
+                    // filled without them.
+                    for k in 0..3 {
+                        acc.g[k] += w * r[k];
+                        acc.h[k * n + k] += w;
+                        for (pj, cj) in &acc.cols {
+                            acc.h[k * n + pj] += w * cj[k];
                         }
-                        first = 3;
                     }
-                    for (i, (pi, ci)) in acc.cols.iter().enumerate().skip(first) {
+                    for (i, (pi, ci)) in acc.cols.iter().enumerate() {
                         acc.g[*pi] += w * ci.dot(&r);
-                        for (j, (pj, cj)) in acc.cols.iter().enumerate().skip(i) {
-                            let mut m = ci.dot(cj);
-                            if t < 1.0 {
-                                m = t * m + (1.0 - t) * acc.along[i] * acc.along[j];
-                            }
-                            acc.h[pi * n + pj] += w * m;
+                        for (pj, cj) in &acc.cols[i..] {
+                            acc.h[pi * n + pj] += w * ci.dot(cj);
                         }
                     }
                     acc
@@ -311,40 +318,25 @@ impl<'a> HeldProblem<'a> {
                 hm[(j, i)] = s;
             }
         }
-        if !rigid.is_empty() {
-            // The closed-form terms, both triangles.
-            let share = if weighted { tangential } else { 1.0 };
-            h.fill(0.0);
-            for m in rigid {
-                m.add_normal_equations(&bones, share, &mut h, &mut g);
-                e += share * m.energy(&bones);
-            }
-            if weighted {
-                for m in &self.plane {
-                    m.add_normal_equations(&bones, 1.0 - tangential, &mut h, &mut g);
-                    e += (1.0 - tangential) * m.energy(&bones);
-                }
-            }
-            hm += DMatrix::from_row_slice(n, n, &h);
+        // The closed-form terms, both triangles.
+        h.fill(0.0);
+        for m in &self.rigid {
+            m.add_normal_equations(bones, 1.0, &mut h, &mut g);
+            e += m.energy(bones);
         }
-        let mut g = DVector::from_vec(g);
-        if let Some(hold) = self.hold {
-            e += hold.add_normal_equations(pose, &mut hm, &mut g);
-        }
-        (hm, g, e)
+        hm += DMatrix::from_row_slice(n, n, &h);
+        (hm, DVector::from_vec(g), e)
     }
 }
 
 /// One chunk's share of the normal equations, with scratch space reused vertex to vertex.
 struct Accumulator {
-    /// H, row-major, one triangle summed (see `normal_equations`).
+    /// H, row-major, one triangle summed (see `point_equations`).
     h: Vec<f64>,
     g: Vec<f64>,
     e: f64,
     blocks: Vec<(usize, [Vector3<f64>; 3])>,
     cols: Vec<(usize, Vector3<f64>)>,
-    /// n . column, per column.
-    along: Vec<f64>,
 }
 
 /// How a run of LM steps went.
@@ -426,12 +418,12 @@ mod tests {
     use crate::skeleton::skinning::tests::{chain, signed_uniform};
     use nalgebra::Rotation3;
 
-    /// The closed-form sums of the rigidly attached vertices give the same energy, gradient
-    /// and Gauss-Newton matrix as summing every vertex one by one: for eq. 4's
-    /// point-to-point held energy, and for the energy whose residuals are weighed along the
-    /// surface by 0.3 and 0.05 ([`HeldProblem::with_tangential`]).
+    /// The held energy, its gradient and its Gauss-Newton matrix (rigid vertices in closed
+    /// form, blended ones one by one) equal a plain sum over every pull and plane with the
+    /// full Jacobian: for eq. 4's point-to-point held energy (1) and for point-to-plane
+    /// blends (0.3, 0.05).
     #[test]
-    fn rigid_moments_match_the_sum_over_vertices() {
+    fn held_equations_match_the_sum_over_pairs() {
         let p = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
         let skeleton = chain();
         let mut rnd = signed_uniform(777);
@@ -441,7 +433,7 @@ mod tests {
         let weights = skin_weights(&skeleton, &rest, 0.05);
         let rigid = weights.iter().filter(|w| w.len() == 1).count();
         assert!(rigid > 1000 && rigid < rest.len(), "{rigid} rigid vertices");
-        // Every other vertex pulled towards a point near it, along a normal of its own.
+        // Every other vertex pulled towards a point near it; two planes per pulled vertex.
         let pulls: Vec<(u32, f64, Vector3<f64>)> = (0..rest.len())
             .step_by(2)
             .map(|v| {
@@ -449,10 +441,18 @@ mod tests {
                 (v as u32, 0.1 + rnd().abs(), c)
             })
             .collect();
-        let normals = (0..pulls.len())
-            .map(|_| (p(rnd(), rnd(), rnd()) + p(0.0, 0.0, 0.3)).normalize())
+        let planes: Vec<Plane> = pulls
+            .iter()
+            .flat_map(|&(v, w, c)| [(v, w, c), (v, 0.5 * w, c + p(0.0, 0.01, 0.0))])
+            .map(|(vertex, weight, point)| Plane {
+                vertex,
+                weight,
+                point,
+                normal: (p(rnd(), rnd(), rnd()) + p(0.0, 0.0, 0.3)).normalize(),
+            })
             .collect();
-        let targets = Targets { pulls, normals };
+        let targets = Targets { pulls, planes };
+        let n = 3 + 3 * skeleton.bones.len();
         for tangential in [1.0, 0.3, 0.05] {
             let problem =
                 HeldProblem::new(&skeleton, &rest, &weights, &targets).with_tangential(tangential);
@@ -462,9 +462,37 @@ mod tests {
                 for r in &mut pose.rotations {
                     *r = Rotation3::new(p(rnd(), rnd(), rnd()) * 0.4);
                 }
+                let bones = PosedBones::new(&skeleton, &pose);
+                // The reference: every residual row with its full Jacobian row.
+                let (mut h1, mut g1, mut e1) = (DMatrix::zeros(n, n), DVector::zeros(n), 0.0);
+                let mut add = |w: f64, y: Vector3<f64>, v: usize, dir: Vector3<f64>, c| {
+                    let mut cols = vec![Vector3::zeros(); n];
+                    crate::skeleton::skinning::vertex_jacobian(
+                        &bones,
+                        &rest[v],
+                        &weights[v],
+                        &mut cols,
+                    );
+                    let r = dir.dot(&(y - c));
+                    let row = DVector::from_iterator(n, cols.iter().map(|col| dir.dot(col)));
+                    h1 += w * &row * row.transpose();
+                    g1 += w * r * row;
+                    e1 += w * r * r;
+                };
+                for &(v, w, c) in &targets.pulls {
+                    let y = pose_vertex(&bones, &rest[v as usize], &weights[v as usize]);
+                    for k in 0..3 {
+                        add(tangential * w, y, v as usize, Vector3::ith(k, 1.0), c);
+                    }
+                }
+                if tangential < 1.0 {
+                    for q in &targets.planes {
+                        let v = q.vertex as usize;
+                        let y = pose_vertex(&bones, &rest[v], &weights[v]);
+                        add((1.0 - tangential) * q.weight, y, v, q.normal, q.point);
+                    }
+                }
                 let (h, g, e) = problem.held_equations(&pose);
-                let every = problem.every_pull();
-                let (h1, g1, e1) = problem.summed(&pose, tangential, &every, &[], true);
                 let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-9 * scale;
                 assert!(close(e, e1, e1), "{tangential}: {e} {e1}");
                 assert!(close(problem.energy(&pose), e1, e1), "{tangential}");
