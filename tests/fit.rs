@@ -173,19 +173,21 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     assert_eq!(r.diagnostics.iterations, 2);
     let obs = observe(&mesh(dir.path(), 6));
     let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
-    assert_eq!(r.diagnostics.iterations, 6);
+    assert_eq!(r.diagnostics.iterations, 2 + 4 + 4);
     let previous_fit = |score: f64| FitDiagnostics {
         score,
         ..FitDiagnostics::unfitted(FitStatus::Converged, obs.vertices.len())
     };
     let far_lower = previous_fit(r.diagnostics.score / 10.0);
     let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&far_lower));
-    assert_eq!(r.diagnostics.iterations, 6);
+    assert_eq!(r.diagnostics.iterations, 2 + 4 + 4);
     // A capped fit whose score did not rise above the previous frame's is kept as it is.
     let higher = previous_fit(r.diagnostics.score * 100.0);
     let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&higher));
     assert_eq!(r.diagnostics.iterations, 2);
-    // Restarts have a cap of their own (`restart.rounds_factor` times the cap).
+    // Restarts have a cap of their own (`restart.rounds_factor` times the cap); from these
+    // starts they may converge before it.
     let r = capped_at(2, 3).fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
-    assert_eq!(r.diagnostics.iterations, 2 + 6 + 6);
+    let rounds = r.diagnostics.iterations;
+    assert!(rounds > 2 + 2 && rounds <= 2 + 6 + 6, "{rounds} rounds");
 }

@@ -1,0 +1,34 @@
+//! The README's quick start: `pipeline run pipeline.yaml` on the bundled sample (the tripod
+//! at 256x192, 7 frames, up to 46 cm of motion between frames) tracks every frame within
+//! 1 cm of the truth.
+
+mod common;
+
+use common::*;
+use std::path::Path;
+
+#[test]
+fn quick_start_tracks_the_bundled_sample_within_a_centimetre() {
+    let dir = process_tempdir();
+    let d = dir.path();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for folder in ["calib", "data"] {
+        copy_tree(&repo.join(folder), &d.join(folder));
+    }
+    std::fs::copy(repo.join("pipeline.yaml"), d.join("pipeline.yaml")).unwrap();
+    let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    eprintln!("{out}");
+    let truth_path = d.join("data/tripod/ground_truth/joints.csv");
+    let truth = hullpose::joints::read(&truth_path).unwrap();
+    let rows = hullpose::joints::read(&d.join("output/joints.csv")).unwrap();
+    let errors: Vec<f64> = hullpose::eval::pose::joint_errors(&truth, &rows, &truth_path)
+        .unwrap()
+        .into_iter()
+        .map(|x| x.1 * 100.0)
+        .collect();
+    eprintln!("mean joint error per frame, cm: {errors:.2?}");
+    assert_eq!(errors.len(), 7);
+    let worst = errors.iter().copied().fold(0.0, f64::max);
+    assert!(worst <= 1.0, "worst frame {worst:.2} cm: {errors:.2?}");
+}
