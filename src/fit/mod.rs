@@ -639,7 +639,6 @@ impl<'a> Fitter<'a> {
         };
         let (_, cap) = p.stopping(p.method);
         let mut best = self.fit_prepared(&prepared, &first, cap);
-        let tried = [first.clone()];
         if !p.restart.enabled || !self.lost(&best, &first, previous, previous_fit) {
             return best;
         }
@@ -649,7 +648,7 @@ impl<'a> Fitter<'a> {
         // frame after t0 the previous pose is the reference pose itself.
         let mut starts: Vec<Pose> = Vec::new();
         for start in second.into_iter().chain([rest]) {
-            if !tried.contains(&start) && !starts.contains(&start) {
+            if start != first && !starts.contains(&start) {
                 starts.push(start);
             }
         }
@@ -661,7 +660,7 @@ impl<'a> Fitter<'a> {
     }
 
     /// Whether a tracked frame's fit from `start` looks lost, so that other starts are
-    /// tried (`params.restarts`):
+    /// tried (`params.restart`):
     /// - its eq. 4 energy is above `restart_energy_ratio` times the previous frame's;
     /// - some bone turned more than `restart_turn_deg` from both `start` and `previous`;
     /// - it hit the iteration cap and its score is above `restart_energy_ratio` times the
@@ -829,7 +828,7 @@ impl<'a> Fitter<'a> {
 
     /// `proposed`'s rounds: (a) pairs, weights and each pair's plane at the current pose,
     /// (b) one Levenberg-Marquardt step on the point-to-plane energy of those pairs
-    /// ([`POINT_SHARE`], [`solve::HeldProblem::with_tangential`]): Gauss-Newton on a
+    /// ([`POINT_SHARE`], [`solve::HeldProblem::with_planes`]): Gauss-Newton on a
     /// linearisation that lets the model slide along the observed surface, so a frame
     /// settles in about ten rounds where point-to-point rounds take hundreds. Stops when no
     /// joint moved more than `tolerance`, or when eq. 4 has not fallen below its lowest
@@ -850,7 +849,7 @@ impl<'a> Fitter<'a> {
         let mut since_best = 0;
         while diagnostics.iterations < cap {
             let (stepped, report) = self.time("lm steps", || {
-                let problem = self.held(&round).with_tangential(POINT_SHARE);
+                let problem = self.held(&round).with_planes(POINT_SHARE);
                 solve::levenberg_marquardt(&problem, &pose, 1, &mut lambda)
             });
             diagnostics.iterations += 1;

@@ -23,7 +23,7 @@ pub struct Targets {
     /// (model vertex, W_v, c_v).
     pub pulls: Vec<(u32, f64, Vector3<f64>)>,
     /// Every weighted pair as a plane (for the point-to-plane energy,
-    /// [`HeldProblem::with_tangential`]); empty when only the point-to-point energy is used.
+    /// [`HeldProblem::with_planes`]); empty when only the point-to-point energy is used.
     pub planes: Vec<Plane>,
 }
 
@@ -50,7 +50,7 @@ pub struct HeldProblem<'a> {
     /// Indices (into `targets.pulls`) of the blended vertices, summed one by one.
     blended: Vec<u32>,
     /// The held energy's share of the point-to-point terms (see
-    /// [`HeldProblem::with_tangential`]); 1: eq. 4's point-to-point energy.
+    /// [`HeldProblem::with_planes`]); 1: eq. 4's point-to-point energy.
     tangential: f64,
     /// With `tangential` below 1, the planes of rigidly attached vertices, per bone.
     plane_rigid: Vec<PlaneMoments>,
@@ -114,7 +114,7 @@ impl<'a> HeldProblem<'a> {
     /// sum w (n . (y - point))^2: each pair measured along its plane's normal, so that the
     /// model slides along the other surface within one step (point-to-plane ICP), where
     /// point-to-point rounds slide one partner change at a time.
-    pub fn with_tangential(mut self, tangential: f64) -> HeldProblem<'a> {
+    pub fn with_planes(mut self, tangential: f64) -> HeldProblem<'a> {
         self.tangential = tangential;
         if tangential < 1.0 {
             let planes = &self.targets.planes;
@@ -143,7 +143,7 @@ impl<'a> HeldProblem<'a> {
     }
 
     /// sum_v W_v |v(p) - c_v|^2 (m^2), blended with the point-to-plane energy as
-    /// [`HeldProblem::with_tangential`] says.
+    /// [`HeldProblem::with_planes`] says.
     pub fn energy(&self, pose: &Pose) -> f64 {
         let bones = PosedBones::new(self.skeleton, pose);
         // Fixed chunks summed in order: the same bits on every run and thread count.
@@ -455,7 +455,7 @@ mod tests {
         let n = 3 + 3 * skeleton.bones.len();
         for tangential in [1.0, 0.3, 0.05] {
             let problem =
-                HeldProblem::new(&skeleton, &rest, &weights, &targets).with_tangential(tangential);
+                HeldProblem::new(&skeleton, &rest, &weights, &targets).with_planes(tangential);
             for _ in 0..5 {
                 let mut pose = Pose::rest(skeleton.bones.len());
                 pose.translation = p(rnd(), rnd(), rnd()) * 0.1;
