@@ -441,7 +441,7 @@ pub fn track(
         )));
     }
     let bar = crate::runner::bar(frames.len(), params.method.name());
-    let tracked = crate::stages::fit::track(&ctx, &frames, &params, &|_| bar.inc(1))?;
+    let tracked = crate::stages::fit::track_in_memory(&ctx, &frames, &params, &|_| bar.inc(1))?;
     bar.finish_and_clear();
     let model = crate::stages::model::load(&ctx)?;
     let rows: Vec<_> = tracked
@@ -565,8 +565,9 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
     let fitter = crate::fit::Fitter::new(&model, params.clone());
     let setup = t.elapsed().as_secs_f64();
     let start = crate::skeleton::Pose::rest(model.skeleton.bones.len());
+    let probe = crate::fit::Probe::default();
     let t = Instant::now();
-    let result = fitter.fit(&obs, &start);
+    let result = fitter.fit(&obs, &start, &probe);
     let total = t.elapsed().as_secs_f64();
     let rounds = result.diagnostics.iterations.max(1) as f64;
     let mut out = format!(
@@ -581,10 +582,10 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
     );
     write_round_steps(
         &mut out,
-        &fitter.timings(),
+        &probe.timings(),
         rounds,
         total,
-        fitter.nearest_reused_share(),
+        probe.nearest_reused_share(),
     );
     Ok(out)
 }

@@ -700,7 +700,8 @@ fn ablation(job: &Job, frames: Option<FrameRange>) -> anyhow::Result<()> {
         };
         let bar = hullpose::runner::bar(tracked.len(), method.name());
         let results =
-            hullpose::stages::fit::track(&ctx, &tracked, &params, &|_| bar.inc(1))?.results;
+            hullpose::stages::fit::track_in_memory(&ctx, &tracked, &params, &|_| bar.inc(1))?
+                .results;
         bar.finish_and_clear();
         let model = hullpose::stages::model::load(&ctx)?;
         let rows: Vec<_> = results

@@ -6,7 +6,7 @@ use crate::cache::{ArtifactState, Cache, KeyBuilder, Manifest};
 use crate::config::{Config, FrameRange};
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
-use crate::stages::{self, Context, Scope, StageDef, STAGES};
+use crate::stages::{self, Compute, Context, Scope, StageDef, STAGES};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -375,25 +375,38 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             })
             .collect();
         let progress = bar(todo.len(), stage.name);
-        let one = |f: u32| -> Result<Vec<String>> {
-            let t = Instant::now();
-            let out = (stage.compute)(&ctx, f)?;
+        let commit = |f: u32, files: Vec<String>, seconds: f64| -> Result<()> {
             job.cache.commit(&Manifest {
                 stage: stage.name.to_string(),
                 frame: f,
                 key: keys[&(stage.name, f)].clone(),
                 format_version: stage.format_version,
-                files: out.files,
-                seconds: t.elapsed().as_secs_f64(),
+                files,
+                seconds,
             })?;
             progress.inc(1);
-            Ok(out.warnings)
+            Ok(())
         };
-        // Tracked frames depend on each other: in order, one at a time.
-        let mut warnings: Vec<Vec<String>> = if stage.scope == Scope::Tracked {
-            todo.iter().map(|&f| one(f)).collect::<Result<_>>()?
-        } else {
-            todo.par_iter().map(|&f| one(f)).collect::<Result<_>>()?
+        let mut warnings: Vec<Vec<String>> = match stage.compute {
+            Compute::Frame(compute) => todo
+                .par_iter()
+                .map(|&f| {
+                    let t = Instant::now();
+                    let out = compute(&ctx, f)?;
+                    commit(f, out.files, t.elapsed().as_secs_f64())?;
+                    Ok(out.warnings)
+                })
+                .collect::<Result<_>>()?,
+            // Tracked frames depend on each other: in order, one at a time.
+            Compute::Tracked(compute) => {
+                let mut warnings = Vec::new();
+                compute(&ctx, &todo, &mut |f, out, seconds| {
+                    commit(f, out.files, seconds)?;
+                    warnings.push(out.warnings);
+                    Ok(())
+                })?;
+                warnings
+            }
         };
         progress.finish_and_clear();
         let mut outputs = Vec::new();

@@ -86,6 +86,7 @@ fn check_round_log(log: &[RoundRecord], r: &hullpose::fit::FitResult, method: Me
 
 #[test]
 fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
+    let probe = hullpose::fit::Probe::default();
     let (dir, skeleton, poses) = truth();
     let model =
         hullpose::stages::model::build(&skeleton, &mesh(dir.path(), 0), &Default::default())
@@ -100,19 +101,23 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
         );
         // From the previous true pose to this frame's, over the motion's hardest frames.
         for f in [5u32, 9, 13] {
-            let r = fitter.fit(&observe(&mesh(dir.path(), f)), &poses[f as usize - 1].1);
+            let r = fitter.fit(
+                &observe(&mesh(dir.path(), f)),
+                &poses[f as usize - 1].1,
+                &probe,
+            );
             let e = joint_error(&skeleton, &r.pose, &poses[f as usize].1);
             eprintln!("{method:?} t{f}: {:.2} mm, {:?}", e * 1000.0, r.diagnostics);
             assert!(e < 0.004, "{method:?} t{f}: joint error {e} m");
             assert_eq!(r.diagnostics.status, FitStatus::Converged);
-            check_round_log(&fitter.take_rounds(), &r, method);
+            check_round_log(&probe.take_rounds(), &r, method);
         }
     }
     let fitter = Fitter::new(&model, FitParams::default());
     let previous = poses[4].1.clone();
     // The round log as CSV: a row per round, its error against the truth as measured here.
-    let r = fitter.fit(&observe(&mesh(dir.path(), 5)), &previous);
-    let log: Vec<(u32, RoundRecord)> = fitter.take_rounds().into_iter().map(|x| (5, x)).collect();
+    let r = fitter.fit(&observe(&mesh(dir.path(), 5)), &previous, &probe);
+    let log: Vec<(u32, RoundRecord)> = probe.take_rounds().into_iter().map(|x| (5, x)).collect();
     let truth_rows = hullpose::stages::fit::joint_rows(&skeleton, 5, &poses[5].1);
     let csv =
         hullpose::bench::rounds_csv(&skeleton, &log, Some((&truth_rows, dir.path()))).unwrap();
@@ -133,7 +138,7 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
         "{last_error} cm logged, {e} cm measured"
     );
     // No observation (the subject out of view): the previous pose, flagged.
-    let r = fitter.fit(&Observation::default(), &previous);
+    let r = fitter.fit(&Observation::default(), &previous, &probe);
     assert_eq!(r.diagnostics.status, FitStatus::NoObservation);
     assert_eq!(r.pose, previous);
     // Too little observed surface (a sliver): the same.
@@ -142,7 +147,7 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     sliver.normals.truncate(50);
     sliver.rho_p.truncate(50);
     assert_eq!(
-        fitter.fit(&sliver, &previous).diagnostics.status,
+        fitter.fit(&sliver, &previous, &probe).diagnostics.status,
         FitStatus::NoObservation
     );
     // NaN in the observation never reaches the pose.
@@ -151,7 +156,7 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
         damaged.vertices[i] = Vector3::repeat(f64::NAN);
         damaged.rho_p[i + 1] = f64::NAN;
     }
-    let r = fitter.fit(&damaged, &previous);
+    let r = fitter.fit(&damaged, &previous, &probe);
     assert!(r.pose.is_finite());
     assert!(r.diagnostics.energy.is_finite() && r.diagnostics.rms.is_finite());
     assert!(joint_error(&skeleton, &r.pose, &poses[5].1) < 0.004);
@@ -168,26 +173,32 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let capped = capped_at(2, 2);
     let obs = observe(&mesh(dir.path(), 1));
     let reference = Pose::rest(skeleton.bones.len());
-    let r = capped.fit_tracked(&obs, &reference, None, None);
+    let r = capped.fit_tracked(&obs, &reference, None, None, &probe);
     assert_eq!(r.diagnostics.status, FitStatus::IterationCap);
     assert_eq!(r.diagnostics.iterations, 2);
     let obs = observe(&mesh(dir.path(), 6));
-    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
+    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None, &probe);
     assert_eq!(r.diagnostics.iterations, 2 + 4 + 4);
     let previous_fit = |score: f64| FitDiagnostics {
         score,
         ..FitDiagnostics::unfitted(FitStatus::Converged, obs.vertices.len())
     };
     let far_lower = previous_fit(r.diagnostics.score / 10.0);
-    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&far_lower));
+    let r = capped.fit_tracked(
+        &obs,
+        &poses[5].1,
+        Some(&poses[4].1),
+        Some(&far_lower),
+        &probe,
+    );
     assert_eq!(r.diagnostics.iterations, 2 + 4 + 4);
     // A capped fit whose score did not rise above the previous frame's is kept as it is.
     let higher = previous_fit(r.diagnostics.score * 100.0);
-    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&higher));
+    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&higher), &probe);
     assert_eq!(r.diagnostics.iterations, 2);
     // Restarts have a cap of their own (`restart.rounds_factor` times the cap); from these
     // starts they may converge before it.
-    let r = capped_at(2, 3).fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None);
+    let r = capped_at(2, 3).fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None, &probe);
     let rounds = r.diagnostics.iterations;
     assert!(rounds > 2 + 2 && rounds <= 2 + 6 + 6, "{rounds} rounds");
 }

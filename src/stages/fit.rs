@@ -10,8 +10,11 @@ use super::{load_observed, Context, Output};
 use crate::cache::KeyBuilder;
 use crate::dataset::frame_stem;
 use crate::error::{Error, Result};
-use crate::fit::{FitDiagnostics, FitResult, FitStatus, Fitter, Observation};
+use crate::fit::{
+    FitDiagnostics, FitResult, FitStatus, Fitter, Neighbours, Observation, Probe, Tracker,
+};
 use crate::joints::JointRow;
+use crate::skeleton::model::BodyModel;
 use crate::skeleton::{Pose, Skeleton};
 use std::path::Path;
 
@@ -96,71 +99,84 @@ fn cached_diagnostics(ctx: &Context, frame: u32) -> Result<FitDiagnostics> {
         .ok_or_else(|| Error::invalid(&path, format!("holds no row for frame {frame}")))
 }
 
-/// Tracks `frames` (in computation order, t0 first, as [`crate::runner::Job::tracked_frames`]
-/// gives them) with `params`, in memory: the fit stage's computation without its cache
-/// (the ablation runs every method this way over one cached reconstruction).
+/// Tracks `frames` (in computation order, as [`crate::runner::Job::tracked_frames`] gives
+/// them: t0 first, or resuming after frames already cached) with `params`: the one path of
+/// `pipeline run` and `pipeline bench track`. Each frame's fit starts from its neighbour's
+/// pose in memory; a neighbour not among `frames` is read back from the cache. After each
+/// frame, `done` gets its fit and the seconds the fit took (loading excluded).
 pub fn track(
+    ctx: &Context,
+    model: &BodyModel,
+    frames: &[u32],
+    params: &crate::fit::FitParams,
+    probe: &Probe,
+    done: &mut dyn FnMut(u32, &FitResult, f64) -> Result<()>,
+) -> Result<()> {
+    let t0 = model.skeleton.reference_frame;
+    let seq = ctx.sequence;
+    let mut tracker = Tracker::new(Fitter::new(model, params.clone()));
+    for &frame in frames {
+        let neighbours = if frame == t0 {
+            None
+        } else {
+            let previous = seq.tracked_previous(frame, t0).ok_or_else(|| {
+                Error::Usage(format!("fit: frame {frame} has no tracked neighbour"))
+            })?;
+            let before = seq.tracked_previous(previous, t0);
+            for f in std::iter::once(previous).chain(before) {
+                if !tracker.knows(f) {
+                    let pose = cached_pose(ctx, &model.skeleton, f)?;
+                    tracker.know(f, pose, cached_diagnostics(ctx, f)?);
+                }
+            }
+            Some(Neighbours { previous, before })
+        };
+        let obs = observation(ctx, frame)?;
+        let started = std::time::Instant::now();
+        let result = tracker.fit(frame, &obs, neighbours, probe);
+        done(frame, &result, started.elapsed().as_secs_f64())?;
+    }
+    Ok(())
+}
+
+/// Tracks `frames` in memory (no cache writes) for benchmarks and the ablation: every
+/// frame's fit, its seconds, and what the probe measured.
+pub fn track_in_memory(
     ctx: &Context,
     frames: &[u32],
     params: &crate::fit::FitParams,
     progress: &dyn Fn(u32),
 ) -> Result<Tracked> {
     let model = super::model::load(ctx)?;
-    let t0 = model.skeleton.reference_frame;
-    let fitter = Fitter::new(&model, params.clone());
-    let mut done: std::collections::HashMap<u32, (Pose, FitDiagnostics)> = Default::default();
+    let probe = Probe::default();
     let mut out = Vec::with_capacity(frames.len());
     let mut seconds = Vec::with_capacity(frames.len());
     let mut rounds = Vec::new();
-    for &frame in frames {
-        let obs = observation(ctx, frame)?;
-        let started = std::time::Instant::now();
-        let result = if frame == t0 {
-            fitter.reference(obs.vertices.len())
-        } else {
-            let seq = ctx.sequence;
-            let previous = seq.tracked_previous(frame, t0);
-            let rest = Pose::rest(model.skeleton.bones.len());
-            let (start, previous_fit) = match previous.and_then(|f| done.get(&f)) {
-                Some((pose, fit)) => (pose, Some(fit)),
-                None => (&rest, None),
-            };
-            let before = previous
-                .and_then(|f| seq.tracked_previous(f, t0))
-                .and_then(|f| done.get(&f))
-                .map(|x| &x.0);
-            fitter.fit_tracked(&obs, start, before, previous_fit)
-        };
-        seconds.push((frame, started.elapsed().as_secs_f64()));
-        rounds.extend(fitter.take_rounds().into_iter().map(|r| (frame, r)));
-        let carried = as_cached(&model.skeleton, frame, &result.pose)?;
-        done.insert(frame, (carried, result.diagnostics.clone()));
-        out.push((frame, result));
-        progress(frame);
-    }
+    track(
+        ctx,
+        &model,
+        frames,
+        params,
+        &probe,
+        &mut |frame, result, secs| {
+            seconds.push((frame, secs));
+            rounds.extend(probe.take_rounds().into_iter().map(|r| (frame, r)));
+            out.push((frame, result.clone()));
+            progress(frame);
+            Ok(())
+        },
+    )?;
     out.sort_by_key(|x| x.0);
     Ok(Tracked {
         results: out,
         seconds,
-        steps: fitter.timings(),
-        nearest_reused: fitter.nearest_reused_share(),
+        steps: probe.timings(),
+        nearest_reused: probe.nearest_reused_share(),
         rounds,
     })
 }
 
-/// `pose` as the next frame's fit reads it back from the cache (poses.csv's rotation
-/// vectors), so that tracking in memory starts every frame exactly where a stage run does:
-/// hard frames are sensitive to differences at the level of rounding.
-fn as_cached(skeleton: &Skeleton, frame: u32, pose: &Pose) -> Result<Pose> {
-    let text = crate::poses::to_csv(skeleton, &[(frame, pose.clone())]);
-    let parsed = crate::poses::parse(Path::new("(tracked pose)"), &text, skeleton)?;
-    Ok(parsed
-        .into_iter()
-        .next()
-        .map_or_else(|| pose.clone(), |p| p.1))
-}
-
-/// What [`track`] computed, and how long it took.
+/// What [`track_in_memory`] computed, and how long it took.
 pub struct Tracked {
     /// Every frame's fit, in frame order.
     pub results: Vec<(u32, FitResult)>,
@@ -175,36 +191,31 @@ pub struct Tracked {
     pub rounds: Vec<(u32, crate::fit::RoundRecord)>,
 }
 
-pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
+/// The stage's computation: tracks `frames` ([`track`]), writing each frame's artifacts and
+/// handing them to `commit` as soon as the frame is fitted.
+pub(super) fn compute(
+    ctx: &Context,
+    frames: &[u32],
+    commit: &mut dyn FnMut(u32, Output, f64) -> Result<()>,
+) -> Result<()> {
     let model = super::model::load(ctx)?;
-    let t0 = model.skeleton.reference_frame;
-    let obs = observation(ctx, frame)?;
-    let fitter = Fitter::new(&model, ctx.config.fit.clone());
-    let result: FitResult = if frame == t0 {
-        fitter.reference(obs.vertices.len())
-    } else {
-        let seq = ctx.sequence;
-        let previous = seq
-            .tracked_previous(frame, t0)
-            .ok_or_else(|| Error::Usage(format!("fit: frame {frame} has no tracked neighbour")))?;
-        let start = cached_pose(ctx, &model.skeleton, previous)?;
-        let before = match seq.tracked_previous(previous, t0) {
-            Some(f) => Some(cached_pose(ctx, &model.skeleton, f)?),
-            None => None,
-        };
-        let previous_fit = cached_diagnostics(ctx, previous)?;
-        fitter.fit_tracked(&obs, &start, before.as_ref(), Some(&previous_fit))
-    };
-    write_frame(ctx, &model, frame, &result)
+    let probe = Probe::default();
+    track(
+        ctx,
+        &model,
+        frames,
+        &ctx.config.fit,
+        &probe,
+        &mut |frame, result, secs| {
+            probe.take_rounds();
+            let out = write_frame(ctx, &model, frame, result)?;
+            commit(frame, out, secs)
+        },
+    )
 }
 
 /// Writes a frame's artifacts.
-fn write_frame(
-    ctx: &Context,
-    model: &crate::skeleton::model::BodyModel,
-    frame: u32,
-    result: &FitResult,
-) -> Result<Output> {
+fn write_frame(ctx: &Context, model: &BodyModel, frame: u32, result: &FitResult) -> Result<Output> {
     use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let dir = ctx.cache.stage_dir("fit");
     let names = files(frame);

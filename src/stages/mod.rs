@@ -68,12 +68,27 @@ pub struct StageDef {
     pub params: fn(&Config) -> String,
     /// Key material from the raw inputs the stage reads directly for a frame.
     pub sources: fn(&Context, u32, &mut KeyBuilder) -> Result<()>,
-    /// Computes and writes the artifact files of a frame.
-    pub compute: fn(&Context, u32) -> Result<Output>,
+    /// Computes and writes the artifact files of the frames.
+    pub compute: Compute,
     /// After the stage: writes sequence-level outputs from the frames' artifacts (the
     /// frames in computation order); returns the files and warnings.
     pub finish: Option<FinishFn>,
 }
+
+/// How a stage computes its frames' artifacts.
+#[derive(Clone, Copy)]
+pub enum Compute {
+    /// Each frame on its own (the runner computes frames side by side).
+    Frame(fn(&Context, u32) -> Result<Output>),
+    /// The frames in order, each from the one before ([`Scope::Tracked`]); the function
+    /// hands each frame's output, and the seconds it took, to the callback (which commits it
+    /// to the cache) as soon as the frame is done.
+    Tracked(TrackedFn),
+}
+
+/// A [`Compute::Tracked`] stage's computation (given the frames, in computation order).
+pub type TrackedFn =
+    fn(&Context, &[u32], &mut dyn FnMut(u32, Output, f64) -> Result<()>) -> Result<()>;
 
 /// A stage's sequence-level step (given the frames, in computation order).
 pub type FinishFn = fn(&Context, &[u32]) -> Result<Finished>;
@@ -108,7 +123,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 1,
         params: |c| crate::yaml::to_string(&c.silhouette).unwrap_or_default(),
         sources: silhouette_sources,
-        compute: silhouette_compute,
+        compute: Compute::Frame(silhouette_compute),
         finish: None,
     },
     StageDef {
@@ -119,7 +134,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 3,
         params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
         sources: visual_hull_sources,
-        compute: visual_hull_compute,
+        compute: Compute::Frame(visual_hull_compute),
         finish: None,
     },
     StageDef {
@@ -130,7 +145,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 11,
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
-        compute: graphcut_compute,
+        compute: Compute::Frame(graphcut_compute),
         finish: None,
     },
     StageDef {
@@ -141,7 +156,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 1,
         params: |c| crate::yaml::to_string(&c.reliability).unwrap_or_default(),
         sources: graphcut_sources,
-        compute: reliability_compute,
+        compute: Compute::Frame(reliability_compute),
         finish: None,
     },
     StageDef {
@@ -152,7 +167,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 2,
         params: |c| crate::yaml::to_string(&c.model).unwrap_or_default(),
         sources: model::sources,
-        compute: model::compute,
+        compute: Compute::Frame(model::compute),
         finish: None,
     },
     StageDef {
@@ -163,7 +178,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 4,
         params: |c| crate::yaml::to_string(&c.fit).unwrap_or_default(),
         sources: fit::sources,
-        compute: fit::compute,
+        compute: Compute::Tracked(fit::compute),
         finish: Some(fit::finish),
     },
     StageDef {
@@ -174,7 +189,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 1,
         params: |c| crate::yaml::to_string(&c.export).unwrap_or_default(),
         sources: |_, _, _| Ok(()),
-        compute: |_, _| Ok(Output::default()),
+        compute: Compute::Frame(|_, _| Ok(Output::default())),
         finish: Some(export_finish),
     },
 ];

@@ -330,7 +330,7 @@ pub fn tracked_joint_rows(
     frames: &[u32],
     params: &hullpose::fit::FitParams,
 ) -> Vec<hullpose::joints::JointRow> {
-    let tracked = hullpose::stages::fit::track(ctx, frames, params, &|_| {}).unwrap();
+    let tracked = hullpose::stages::fit::track_in_memory(ctx, frames, params, &|_| {}).unwrap();
     joint_rows_of(skeleton, &tracked)
 }
 

@@ -1,0 +1,242 @@
+//! The fit stage's parameters (pipeline.yaml key `fit`) and their checks: which method
+//! (the paper's and the baselines it compares with), where a frame starts, the contact
+//! weight, the sampling, when the rounds stop and when a lost fit is restarted.
+
+use super::contact::ContactParams;
+use serde::{Deserialize, Serialize};
+
+/// Which weights the energy uses: the paper's method and the baselines it compares with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Every pair weighs 1 (articulated ICP).
+    Icp,
+    /// Ogawara et al.: pairs whose normals differ by more than `normal_angle_deg` weigh 0,
+    /// the others 1.
+    Normals,
+    /// rho_c(v) only.
+    RhoC,
+    /// rho_p(u) only.
+    RhoP,
+    /// rho_c(v) rho_p(u) (paper eq. 4).
+    Proposed,
+}
+
+impl Method {
+    pub const ALL: [Method; 5] = [
+        Method::Icp,
+        Method::Normals,
+        Method::RhoC,
+        Method::RhoP,
+        Method::Proposed,
+    ];
+
+    /// The name used in pipeline.yaml and in outputs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Icp => "icp",
+            Method::Normals => "normals",
+            Method::RhoC => "rho_c",
+            Method::RhoP => "rho_p",
+            Method::Proposed => "proposed",
+        }
+    }
+
+    pub(super) fn uses_rho_c(self) -> bool {
+        matches!(self, Method::RhoC | Method::Proposed)
+    }
+
+    pub(super) fn uses_rho_p(self) -> bool {
+        matches!(self, Method::RhoP | Method::Proposed)
+    }
+}
+
+/// Where a tracked frame's fit starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Start {
+    /// The previous frame's pose (method.md's literal rule).
+    Previous,
+    /// The previous pose moved on by the last frame-to-frame motion (constant velocity:
+    /// L_pred = (L_prev L_before⁻¹) L_prev per bone, likewise the root translation); the
+    /// previous pose itself at the first tracked frame. It overshoots where the motion
+    /// turns or stops (the bundled sample's frames 3-4: 8 and 11 cm off from it, 0.3 cm
+    /// from the previous pose); `proposed` tries it as a second start anyway.
+    Predicted,
+}
+
+/// Parameters of the fit stage (pipeline.yaml key `fit`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FitParams {
+    /// `icp`, `normals`, `rho_c`, `rho_p` or `proposed` (default).
+    pub method: Method,
+    /// Where a tracked frame starts: `previous` (default) or `predicted` ([`Start`]).
+    /// A fit that looks lost is fitted again from the other one ([`RestartParams`]).
+    pub start: Start,
+    /// rho_c and the contact partners ([`ContactParams`]).
+    pub contact: ContactParams,
+    /// For `normals`: pairs whose normals differ by more than this are rejected, degrees.
+    /// Default 45.
+    pub normal_angle_deg: f64,
+    /// Spacing of the observed vertices the energy runs over, metres: each frame's surface
+    /// is thinned to one vertex per cube of this size (the vertex nearest the cube's
+    /// centre), about the paper's 1 cm triangles. 0 keeps every vertex. Default 0.01.
+    pub sample_spacing: f64,
+    /// The same for the model's vertices, metres. Default 0.01 (the paper's setting).
+    pub model_spacing: f64,
+    /// When a frame's rounds stop ([`StopParams`]).
+    pub stop: StopParams,
+    /// Frames whose observed surface has fewer vertices than this share of the model's keep
+    /// the previous pose (and are flagged). Default 0.05.
+    pub min_observed_share: f64,
+    /// Fits again from other starts when a fit looks lost ([`RestartParams`]).
+    pub restart: RestartParams,
+}
+
+/// When a frame's rounds stop (pipeline.yaml key `fit.stop`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StopParams {
+    /// `proposed` (Gauss-Newton rounds): converged when no joint moved more than this in a
+    /// round, metres. Default 0.0001.
+    pub tolerance: f64,
+    /// `proposed`: rounds per start at most. Default 60.
+    pub max_rounds: usize,
+    /// The baselines (point-to-point rounds, which converge linearly): the same tolerance,
+    /// metres. Default 0.00001.
+    pub baseline_tolerance: f64,
+    /// The baselines: rounds per start at most. Default 120.
+    pub baseline_max_rounds: usize,
+}
+
+impl Default for StopParams {
+    fn default() -> Self {
+        StopParams {
+            tolerance: 0.0001,
+            max_rounds: 60,
+            baseline_tolerance: 0.00001,
+            baseline_max_rounds: 120,
+        }
+    }
+}
+
+/// Restarts of a fit that looks lost (pipeline.yaml key `fit.restart`; `tracking.rs`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RestartParams {
+    /// Whether a lost fit is fitted again from the other start and from the reference pose
+    /// at the previous root position, keeping the lowest score. Default true.
+    pub enabled: bool,
+    /// A fit is lost when its energy rose above this times the previous frame's (or hit
+    /// the round cap with its score so risen). Default 3.
+    pub energy_ratio: f64,
+    /// A fit is also lost when a bone's head-to-tail direction ends more than this many
+    /// degrees from its direction both in the start pose and in the previous frame's pose
+    /// (a limb folded back onto itself). Default 45.
+    pub turn_deg: f64,
+    /// Rounds per restart at most, as a multiple of the method's round cap. Default 2.
+    pub rounds_factor: usize,
+}
+
+impl Default for RestartParams {
+    fn default() -> Self {
+        RestartParams {
+            enabled: true,
+            energy_ratio: 3.0,
+            turn_deg: 45.0,
+            rounds_factor: 2,
+        }
+    }
+}
+
+impl Default for FitParams {
+    fn default() -> Self {
+        FitParams {
+            method: Method::Proposed,
+            start: Start::Previous,
+            contact: ContactParams::default(),
+            normal_angle_deg: 45.0,
+            sample_spacing: 0.01,
+            model_spacing: 0.01,
+            stop: StopParams::default(),
+            min_observed_share: 0.05,
+            restart: RestartParams::default(),
+        }
+    }
+}
+
+impl FitParams {
+    /// The tolerance (metres) and round cap of `method`'s rounds.
+    pub fn stopping(&self, method: Method) -> (f64, usize) {
+        if method == Method::Proposed {
+            (self.stop.tolerance, self.stop.max_rounds)
+        } else {
+            (self.stop.baseline_tolerance, self.stop.baseline_max_rounds)
+        }
+    }
+}
+
+/// Checks parameters that do not depend on the data.
+pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    let c = &p.contact;
+    if !positive(c.alpha_c) || !positive(c.tau_c) || !positive(c.rest_distance) {
+        return Err(
+            "fit.contact: alpha_c, tau_c and rest_distance must be positive numbers".into(),
+        );
+    }
+    if !(p.normal_angle_deg > 0.0 && p.normal_angle_deg <= 180.0) {
+        return Err(format!(
+            "fit.normal_angle_deg must be in (0, 180] degrees, got {}",
+            p.normal_angle_deg
+        ));
+    }
+    let s = &p.stop;
+    if s.max_rounds == 0 || s.baseline_max_rounds == 0 || p.restart.rounds_factor == 0 {
+        return Err(
+            "fit: stop.max_rounds, stop.baseline_max_rounds and restart.rounds_factor must be at least 1"
+                .into(),
+        );
+    }
+    for (key, spacing) in [
+        ("sample_spacing", p.sample_spacing),
+        ("model_spacing", p.model_spacing),
+    ] {
+        if !(spacing >= 0.0 && spacing.is_finite()) {
+            return Err(format!(
+                "fit.{key} must be 0 (every vertex) or a spacing in metres, got {spacing}"
+            ));
+        }
+    }
+    for (key, tolerance) in [
+        ("tolerance", s.tolerance),
+        ("baseline_tolerance", s.baseline_tolerance),
+    ] {
+        if !positive(tolerance) {
+            return Err(format!(
+                "fit.stop.{key} must be a positive distance in metres, got {tolerance}"
+            ));
+        }
+    }
+    let r = &p.restart;
+    if !(r.energy_ratio.is_finite() && r.energy_ratio >= 1.0) {
+        return Err(format!(
+            "fit.restart.energy_ratio must be a number >= 1, got {}",
+            r.energy_ratio
+        ));
+    }
+    if !(r.turn_deg > 0.0 && r.turn_deg <= 180.0) {
+        return Err(format!(
+            "fit.restart.turn_deg must be in (0, 180] degrees, got {}",
+            r.turn_deg
+        ));
+    }
+    if !(0.0..1.0).contains(&p.min_observed_share) {
+        return Err(format!(
+            "fit.min_observed_share must be in [0, 1), got {}",
+            p.min_observed_share
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,99 @@
+//! What the fit takes and gives: one frame's observed surface, and the fitted pose with
+//! its diagnostics (the rows of `fit.csv`).
+
+use crate::skeleton::Pose;
+use nalgebra::Vector3;
+
+/// One frame's observed surface (from the reliability stage).
+#[derive(Debug, Clone, Default)]
+pub struct Observation {
+    /// Vertices, world metres.
+    pub vertices: Vec<Vector3<f64>>,
+    /// Unit outward normals.
+    pub normals: Vec<Vector3<f64>>,
+    /// rho_p per vertex, (0, 1).
+    pub rho_p: Vec<f64>,
+}
+
+/// How a frame's fit ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FitStatus {
+    /// The reference frame: the embedded skeleton's pose, not fitted.
+    Reference,
+    /// Converged within the tolerance.
+    Converged,
+    /// Stopped at `max_iterations`.
+    IterationCap,
+    /// Too little observed surface: the previous pose was kept.
+    NoObservation,
+}
+
+impl FitStatus {
+    pub fn name(self) -> &'static str {
+        match self {
+            FitStatus::Reference => "reference",
+            FitStatus::Converged => "converged",
+            FitStatus::IterationCap => "iteration_cap",
+            FitStatus::NoObservation => "no_observation",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<FitStatus> {
+        [
+            FitStatus::Reference,
+            FitStatus::Converged,
+            FitStatus::IterationCap,
+            FitStatus::NoObservation,
+        ]
+        .into_iter()
+        .find(|f| f.name() == s)
+    }
+}
+
+/// Per-frame fit diagnostics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitDiagnostics {
+    pub status: FitStatus,
+    /// Correspondence rounds.
+    pub iterations: usize,
+    /// Accepted LM steps over all rounds.
+    pub lm_steps: usize,
+    /// Paper eq. 4 at the final pose with the final pairs (weights normalized by R_c R_p,
+    /// m^2).
+    pub energy: f64,
+    /// Weighted root-mean-square pair distance at the end, metres.
+    pub rms: f64,
+    /// Share of pairs (both directions) weighing less than 0.5.
+    pub downweighted_share: f64,
+    /// Share of model vertices with rho_c < 0.5 (0 for methods without rho_c).
+    pub contact_share: f64,
+    /// The fit's score at the final pose, m^2: the method's energy without rho_c
+    /// (`Round::score` in round.rs; equal to `energy` for methods without rho_c).
+    pub score: f64,
+    /// Observed vertices.
+    pub observed: usize,
+}
+
+impl FitDiagnostics {
+    /// A frame not (yet) fitted: no rounds, zero energy.
+    pub fn unfitted(status: FitStatus, observed: usize) -> FitDiagnostics {
+        FitDiagnostics {
+            status,
+            iterations: 0,
+            lm_steps: 0,
+            energy: 0.0,
+            rms: 0.0,
+            downweighted_share: 0.0,
+            contact_share: 0.0,
+            score: 0.0,
+            observed,
+        }
+    }
+}
+
+/// A fitted frame.
+#[derive(Debug, Clone)]
+pub struct FitResult {
+    pub pose: Pose,
+    pub diagnostics: FitDiagnostics,
+}

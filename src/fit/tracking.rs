@@ -1,0 +1,253 @@
+//! Tracking over frames (method.md "Stage 6"): each frame's fit starts from its tracked
+//! neighbour's pose (nearer the reference frame t0), and a fit that looks lost is fitted
+//! again from other starts. [`Tracker`] is the one path that `pipeline run` and
+//! `pipeline bench track` both take.
+
+use super::pairs::prepare;
+use super::probe::Probe;
+use super::{FitDiagnostics, FitResult, FitStatus, Fitter, Observation, Start};
+use crate::skeleton::model::BodyModel;
+use crate::skeleton::{Pose, PosedBones, Skeleton};
+use nalgebra::Vector3;
+use std::collections::HashMap;
+
+/// Fits the frames of a sequence in tracking order, keeping each fitted frame's pose and
+/// diagnostics in memory for the frames that start from it.
+pub struct Tracker<'a> {
+    pub fitter: Fitter<'a>,
+    /// The frames fitted (or read back) so far.
+    done: HashMap<u32, (Pose, FitDiagnostics)>,
+}
+
+/// Where a tracked frame's fit starts: its tracked neighbour nearer t0 (`previous`), and
+/// that frame's own neighbour (`before`, for the constant-velocity prediction).
+#[derive(Debug, Clone, Copy)]
+pub struct Neighbours {
+    pub previous: u32,
+    pub before: Option<u32>,
+}
+
+impl<'a> Tracker<'a> {
+    pub fn new(fitter: Fitter<'a>) -> Tracker<'a> {
+        Tracker {
+            fitter,
+            done: HashMap::new(),
+        }
+    }
+
+    /// Whether `frame`'s result is known (fitted, or given by [`Tracker::know`]).
+    pub fn knows(&self, frame: u32) -> bool {
+        self.done.contains_key(&frame)
+    }
+
+    /// Takes `frame`'s result as fitted earlier (read back from the cache).
+    pub fn know(&mut self, frame: u32, pose: Pose, diagnostics: FitDiagnostics) {
+        self.done.insert(frame, (pose, diagnostics));
+    }
+
+    /// Fits `frame` from its `neighbours` (none: the reference frame t0, not fitted); a
+    /// neighbour not known starts from the reference pose.
+    pub fn fit(
+        &mut self,
+        frame: u32,
+        obs: &Observation,
+        neighbours: Option<Neighbours>,
+        probe: &Probe,
+    ) -> FitResult {
+        let result = match neighbours {
+            None => self.fitter.reference(obs.vertices.len()),
+            Some(n) => {
+                let rest = Pose::rest(self.fitter.model.skeleton.bones.len());
+                let (start, previous_fit) = match self.done.get(&n.previous) {
+                    Some((pose, fit)) => (pose, Some(fit)),
+                    None => (&rest, None),
+                };
+                let before = n.before.and_then(|f| self.done.get(&f)).map(|x| &x.0);
+                self.fitter
+                    .fit_tracked(obs, start, before, previous_fit, probe)
+            }
+        };
+        self.done
+            .insert(frame, (result.pose.clone(), result.diagnostics.clone()));
+        result
+    }
+}
+
+impl Fitter<'_> {
+    /// Fits a tracked frame from the start `params.start` chooses (`previous` is the
+    /// neighbour's pose, nearer t0; `before` the pose one frame further back), and when that
+    /// fit looks lost ([`Fitter::lost`]) also from the other of the two and from the
+    /// reference pose at the previous root position; the lowest score
+    /// ([`FitDiagnostics::score`]) wins. `iterations` counts the rounds of every start. A
+    /// frame without enough observation keeps `previous`. `previous_fit` is the fit of the
+    /// frame `previous` belongs to (none, or zero energy and score, when unknown).
+    pub fn fit_tracked(
+        &self,
+        obs: &Observation,
+        previous: &Pose,
+        before: Option<&Pose>,
+        previous_fit: Option<&FitDiagnostics>,
+        probe: &Probe,
+    ) -> FitResult {
+        let p = &self.params;
+        let Some(prepared) = prepare(obs, p, self.model.mesh.vertices.len()) else {
+            return self.unobserved(obs, previous);
+        };
+        let predicted = before.map(|before| predict(previous, before));
+        let (first, second) = match (&predicted, p.start) {
+            (Some(pred), Start::Predicted) => (pred.clone(), Some(previous.clone())),
+            _ => (previous.clone(), predicted.clone()),
+        };
+        let (_, cap) = p.stopping(p.method);
+        let mut best = self.fit_prepared(&prepared, &first, cap, probe);
+        if !p.restart.enabled || !self.lost(&best, &first, previous, previous_fit) {
+            return best;
+        }
+        let mut rest = Pose::rest(previous.rotations.len());
+        rest.translation = previous.translation;
+        // A start already tried would end where it did (the fit is deterministic): at the
+        // frame after t0 the previous pose is the reference pose itself.
+        let mut starts: Vec<Pose> = Vec::new();
+        for start in second.into_iter().chain([rest]) {
+            if start != first && !starts.contains(&start) {
+                starts.push(start);
+            }
+        }
+        for start in &starts {
+            let r = self.fit_prepared(&prepared, start, cap * p.restart.rounds_factor, probe);
+            best = better(best, r);
+        }
+        best
+    }
+
+    /// Whether a tracked frame's fit from `start` looks lost, so that other starts are
+    /// tried (`params.restart`):
+    /// - its eq. 4 energy is above `restart_energy_ratio` times the previous frame's;
+    /// - some bone turned more than `restart_turn_deg` from both `start` and `previous`;
+    /// - it hit the iteration cap and its score is above `restart_energy_ratio` times the
+    ///   previous frame's (or that is unknown). A capped fit whose score stayed level is
+    ///   sliding or circling near its answer: restarting the tripod's t11 from two farther
+    ///   starts took 617 more rounds and kept the first fit. A capped fit whose score rose
+    ///   has pressed parts into each other where rho_c hides them (the humanoid's t23: eq.
+    ///   4 level with t22, the score 39 times t22's; the reference pose wins there).
+    fn lost(
+        &self,
+        fit: &FitResult,
+        start: &Pose,
+        previous: &Pose,
+        previous_fit: Option<&FitDiagnostics>,
+    ) -> bool {
+        let p = &self.params;
+        let d = &fit.diagnostics;
+        let rose = |now: f64, before: Option<f64>| {
+            before.is_some_and(|b| b > 0.0 && now > p.restart.energy_ratio * b)
+        };
+        let score_known = previous_fit.is_some_and(|f| f.score > 0.0);
+        rose(d.energy, previous_fit.map(|f| f.energy))
+            || largest_turn_deg(&self.model.skeleton, &fit.pose, start, previous)
+                > p.restart.turn_deg
+            || (d.status == FitStatus::IterationCap
+                && (!score_known || rose(d.score, previous_fit.map(|f| f.score))))
+    }
+
+    /// The result for a frame with too little usable observation: `pose` kept, flagged.
+    pub(super) fn unobserved(&self, obs: &Observation, pose: &Pose) -> FitResult {
+        FitResult {
+            pose: pose.clone(),
+            diagnostics: FitDiagnostics::unfitted(FitStatus::NoObservation, obs.vertices.len()),
+        }
+    }
+}
+
+/// The last frame-to-frame motion applied once more (constant velocity):
+/// L_pred = (L L_before⁻¹) L per bone, likewise the root translation.
+fn predict(previous: &Pose, before: &Pose) -> Pose {
+    Pose {
+        translation: previous.translation * 2.0 - before.translation,
+        rotations: previous
+            .rotations
+            .iter()
+            .zip(&before.rotations)
+            .map(|(l, lb)| (l * lb.inverse()) * l)
+            .collect(),
+    }
+}
+
+/// The largest displacement of any joint (head or tail) between two poses, metres.
+pub fn joint_motion(model: &BodyModel, a: &Pose, b: &Pose) -> f64 {
+    largest_distance(&joints_of(model, a), &joints_of(model, b))
+}
+
+/// Every joint (head, tail) of the model at `pose`, metres.
+fn joints_of(model: &BodyModel, pose: &Pose) -> Vec<Vector3<f64>> {
+    crate::skeleton::pose::joints(&model.skeleton, pose)
+        .into_iter()
+        .flat_map(|(head, tail)| [head, tail])
+        .collect()
+}
+
+/// The largest distance between corresponding points, metres.
+fn largest_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).norm())
+        .fold(0.0, f64::max)
+}
+
+/// The fit with the lower score ([`FitDiagnostics::score`]), with the rounds and steps of
+/// both.
+fn better(a: FitResult, b: FitResult) -> FitResult {
+    let (rounds, steps) = (
+        a.diagnostics.iterations + b.diagnostics.iterations,
+        a.diagnostics.lm_steps + b.diagnostics.lm_steps,
+    );
+    let mut best = if b.diagnostics.score < a.diagnostics.score {
+        b
+    } else {
+        a
+    };
+    best.diagnostics.iterations = rounds;
+    best.diagnostics.lm_steps = steps;
+    best
+}
+
+/// The largest angle, degrees, by which a bone's head-to-tail direction in `pose` differs
+/// from its direction in whichever of `a` and `b` is nearer to it.
+fn largest_turn_deg(skeleton: &Skeleton, pose: &Pose, a: &Pose, b: &Pose) -> f64 {
+    let [fit, a, b] = [pose, a, b].map(|q| PosedBones::new(skeleton, q));
+    let direction = |bones: &PosedBones, i: usize| bones.tails[i] - bones.heads[i];
+    (0..skeleton.bones.len())
+        .map(|i| {
+            let d = direction(&fit, i);
+            d.angle(&direction(&a, i)).min(d.angle(&direction(&b, i)))
+        })
+        .fold(0.0, f64::max)
+        .to_degrees()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::skeleton::skinning::tests::chain;
+    use nalgebra::Rotation3;
+
+    /// A bone folded back is measured from the nearer of the two reference poses; turning a
+    /// parent turns its child's direction too, and a root translation turns nothing.
+    #[test]
+    fn largest_turn_is_measured_from_the_nearer_pose() {
+        let skeleton = chain();
+        let rest = Pose::rest(skeleton.bones.len());
+        let mut folded = rest.clone();
+        // Bone "b" (index 2) turned 150 degrees about the vertical axis.
+        folded.rotations[2] = Rotation3::new(Vector3::z() * 150f64.to_radians());
+        let mut moved = rest.clone();
+        moved.translation = Vector3::new(0.3, -0.2, 0.1);
+        let turn = |p: &Pose, a: &Pose, b: &Pose| largest_turn_deg(&skeleton, p, a, b);
+        assert!((turn(&folded, &rest, &moved) - 150.0).abs() < 1e-6);
+        assert!(turn(&folded, &rest, &folded).abs() < 1e-6);
+        assert!(turn(&moved, &rest, &rest).abs() < 1e-6);
+        let mut arm = rest.clone();
+        arm.rotations[1] = Rotation3::new(Vector3::y() * 70f64.to_radians());
+        assert!((turn(&arm, &rest, &rest) - 70.0).abs() < 1e-6);
+    }
+}
