@@ -34,10 +34,13 @@ impl KeyBuilder {
         self
     }
 
-    /// Adds a file's content.
+    /// Adds a file's content (a regular file only; hashed as it is read, so its size does not
+    /// matter).
     pub fn add_file(&mut self, path: &Path) -> Result<&mut Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let digest = blake3::hash(&bytes);
+        let file = crate::limits::open_regular(path)?;
+        let mut hasher = blake3::Hasher::new();
+        hasher.update_reader(file).map_err(|e| Error::io(path, e))?;
+        let digest = hasher.finalize();
         Ok(self.add(&path.to_string_lossy(), &digest.to_hex()))
     }
 
@@ -97,7 +100,7 @@ impl Cache {
     /// missing and is recomputed).
     pub fn manifest(&self, stage: &str, frame: u32) -> Option<Manifest> {
         let path = self.manifest_path(stage, frame);
-        let text = std::fs::read_to_string(&path).ok()?;
+        let text = crate::fsutil::read_to_string(&path).ok()?;
         crate::yaml::from_str(&path, &text).ok()
     }
 

@@ -38,10 +38,15 @@ pub fn frame_stem(index: u32) -> String {
     format!("{index:06}")
 }
 
+/// An image reader on the regular file at `path` ([`crate::limits::open_regular`]).
+fn open_image(path: &Path) -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
+    let file = crate::limits::open_regular(path)?;
+    Ok(image::ImageReader::new(std::io::BufReader::new(file)))
+}
+
 /// Reads an image's dimensions from its header without decoding it.
 pub fn image_dimensions(path: &Path) -> Result<(u32, u32)> {
-    image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, e))?
+    open_image(path)?
         .with_guessed_format()
         .map_err(|e| Error::io(path, e))?
         .into_dimensions()
@@ -56,10 +61,9 @@ pub fn image_dimensions(path: &Path) -> Result<(u32, u32)> {
 /// Decodes an image after checking its header: the dimensions must be `expected` (the
 /// camera's calibration, when given) and within the image cap ([`crate::limits`]), so a
 /// header claiming a huge image is refused before anything is allocated for it.
-fn decode(path: &Path, expected: Option<&Camera>) -> Result<image::DynamicImage> {
+pub fn decode(path: &Path, expected: Option<&Camera>) -> Result<image::DynamicImage> {
     let open = || -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
-        image::ImageReader::open(path)
-            .map_err(|e| Error::io(path, e))?
+        open_image(path)?
             .with_guessed_format()
             .map_err(|e| Error::io(path, e))
     };
@@ -242,11 +246,12 @@ impl Sequence {
             let _ = cam;
         }
         jobs.par_iter().try_for_each(|(c, path)| {
-            if !path.is_file() {
+            // A path that exists but is not a regular file is refused by the reading below.
+            if !path.exists() {
                 return Err(Error::invalid(
                     path,
                     format!(
-                        "missing file for camera '{}'; when masks/ exists every camera needs every frame's mask",
+                        "missing file for camera '{}'; every camera needs every frame (and every frame's mask when masks/ exists)",
                         self.cameras[*c].name
                     ),
                 ));

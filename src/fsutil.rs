@@ -99,9 +99,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic_with(path, |w| w.write_all(bytes))
 }
 
-/// Reads a whole text file, naming the path on error; files over the text cap
-/// ([`crate::limits`]) are refused before reading.
+/// Reads a whole text file, naming the path on error: a regular file only, read within
+/// the text cap ([`crate::limits`]) whatever its metadata claims.
 pub fn read_to_string(path: &Path) -> Result<String> {
-    crate::limits::check_text_file(path)?;
-    std::fs::read_to_string(path).map_err(|e| Error::io(path, e))
+    let bytes = crate::limits::read_text_file(path)?;
+    String::from_utf8(bytes)
+        .map_err(|_| Error::invalid(path, "is not UTF-8 text; save it as UTF-8"))
 }

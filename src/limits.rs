@@ -49,6 +49,20 @@ impl Cap {
         self.units().saturating_mul(self.unit)
     }
 
+    /// The error for a file that holds more than the cap (its size unknown beyond it).
+    fn refuse_over(&self, path: &Path, what: &str) -> Error {
+        Error::invalid(
+            path,
+            format!(
+                "{what} holds more than the {} {} allowed; if the file is genuine, raise the \
+                 cap with the environment variable {}",
+                self.units(),
+                self.unit_name,
+                self.env
+            ),
+        )
+    }
+
     fn refuse(&self, path: &Path, what: &str, size: u64) -> Error {
         Error::invalid(
             path,
@@ -65,25 +79,78 @@ impl Cap {
     }
 }
 
-/// The size of the file at `path`, checked against `cap`.
-fn check_file(path: &Path, cap: &Cap, what: &str) -> Result<u64> {
-    let size = std::fs::metadata(path)
-        .map_err(|e| Error::io(path, e))?
-        .len();
-    if size > cap.bytes() {
-        return Err(cap.refuse(path, what, size));
+/// Opens the input file at `path` for reading, refusing anything that is not a regular file
+/// (a FIFO would block, a device such as /dev/urandom never ends, a folder cannot be read):
+/// checked before opening (following symlinks), and again on the opened handle, which is
+/// opened without blocking so that a FIFO swapped in between cannot hang the run.
+pub fn open_regular(path: &Path) -> Result<std::fs::File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let not_regular = |kind: &str| {
+        Error::invalid(
+            path,
+            format!("is {kind}, not a regular file; give the path of a regular file"),
+        )
+    };
+    let kind = |meta: &std::fs::Metadata| {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_dir() {
+            "a folder"
+        } else if t.is_fifo() {
+            "a FIFO (named pipe)"
+        } else if t.is_char_device() || t.is_block_device() {
+            "a device"
+        } else if t.is_socket() {
+            "a socket"
+        } else {
+            "not a regular file"
+        }
+    };
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(not_regular(kind(&meta)));
     }
-    Ok(size)
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|e| Error::io(path, e))?;
+    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(not_regular(kind(&meta)));
+    }
+    Ok(file)
 }
 
-/// Checks a text input's size before it is read.
-pub fn check_text_file(path: &Path) -> Result<u64> {
-    check_file(path, &TEXT, "the text file")
+/// Reads the regular file at `path` whole, reading at most `cap` bytes plus one whatever
+/// its metadata claims, and refusing it when it holds more.
+fn read_capped(path: &Path, cap: &Cap, what: &str) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let file = open_regular(path)?;
+    let limit = cap.bytes();
+    let mut bytes = Vec::new();
+    file.take(limit.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| Error::io(path, e))?;
+    if bytes.len() as u64 > limit {
+        return Err(cap.refuse_over(path, what));
+    }
+    Ok(bytes)
 }
 
-/// Checks a mesh file's size before it is read.
-pub fn check_mesh_file(path: &Path) -> Result<u64> {
-    check_file(path, &MESH, "the mesh file")
+/// Reads a text input (YAML, CSV, COLMAP text, OpenCV FileStorage) within the text cap.
+pub fn read_text_file(path: &Path) -> Result<Vec<u8>> {
+    read_capped(path, &TEXT, "the text file")
+}
+
+/// Reads a cached artifact (grid, observation, body model) within the mesh cap.
+pub fn read_cache_file(path: &Path) -> Result<Vec<u8>> {
+    read_capped(path, &MESH, "the cached artifact")
+}
+
+/// Reads a mesh file (PLY, OBJ) within the mesh cap.
+pub fn read_mesh_file(path: &Path) -> Result<Vec<u8>> {
+    read_capped(path, &MESH, "the mesh file")
 }
 
 /// Checks an image's dimensions (from its header) before it is decoded.

@@ -244,3 +244,84 @@ fn huge_claims_are_refused_within_100_mb() {
         assert!(peak < 100 * 1024, "{case}: peak memory {peak} kB");
     }
 }
+
+/// Runs `pipeline ARGS` in `cwd`, killing it after 60 s: (exit success, stderr), or `None`
+/// when it had to be killed.
+fn run_cli_bounded(args: &[&str], cwd: &Path) -> Option<(bool, String)> {
+    use std::io::Read;
+    let mut child = std::process::Command::new(pipeline_bin())
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let mut err = String::new();
+            child
+                .stderr
+                .take()
+                .unwrap()
+                .read_to_string(&mut err)
+                .unwrap();
+            return Some((status.success(), err));
+        }
+        if started.elapsed().as_secs() > 60 {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// A symlink to a device or a FIFO in place of an input is refused by name, at once, with
+/// no memory blow-up (these read /dev/urandom until killed, or blocked forever).
+#[test]
+fn non_regular_inputs_are_refused_by_name() {
+    let outer = tempfile::tempdir().unwrap();
+    let run = outer.path().join("run");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    copy_tree(&repo.join("calib"), &run.join("calib"));
+    copy_tree(&repo.join("data"), &run.join("data"));
+    std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+    let seq = run.join("data/tripod");
+    let cases: [(&str, &str, &str); 3] = [
+        ("skeleton.yaml", "/dev/urandom", "a device"),
+        ("ground_truth/joints.csv", "/dev/zero", "a device"),
+        ("frames/cam00/000002.png", "/dev/urandom", "a device"),
+    ];
+    for (file, target, kind) in cases {
+        let path = seq.join(file);
+        let saved = run.join("saved");
+        std::fs::rename(&path, &saved).unwrap();
+        std::os::unix::fs::symlink(target, &path).unwrap();
+        let (ok, err) = run_cli_bounded(&["check", "pipeline.yaml"], &run)
+            .unwrap_or_else(|| panic!("{file} -> {target}: check did not end within 60 s"));
+        assert!(!ok, "{file} -> {target}: accepted");
+        assert!(
+            err.contains(file) && err.contains(kind) && err.contains("not a regular file"),
+            "{file} -> {target}: {err}"
+        );
+        std::fs::remove_file(&path).unwrap();
+        std::fs::rename(&saved, &path).unwrap();
+    }
+    // A FIFO as the pipeline file.
+    let fifo = run.join("fifo.yaml");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap();
+    assert!(made.success());
+    let (ok, err) = run_cli_bounded(&["check", "fifo.yaml"], &run)
+        .expect("a FIFO as the pipeline file: check did not end within 60 s");
+    assert!(
+        !ok && err.contains("fifo.yaml") && err.contains("FIFO"),
+        "{err}"
+    );
+    // The untouched capture still checks clean.
+    let (ok, err) = run_cli_bounded(&["check", "pipeline.yaml"], &run).unwrap();
+    assert!(ok, "{err}");
+}

@@ -110,7 +110,7 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
             let (ply, grid_file) = crate::stages::hull_files(frame);
             let mesh = crate::geometry::ply::read_ply(&dir.join(&ply))?;
             let path = dir.join(&grid_file);
-            let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            let data = crate::limits::read_cache_file(&path)?;
             let (grid, sdf) = crate::stages::visual_hull::parse_grid(&path, &data)?;
             let (accuracy90, completeness) = score_against(
                 &mesh,
@@ -199,7 +199,7 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
             let dir = job.cache.stage_dir(stage);
             let mesh = crate::geometry::ply::read_ply(&dir.join(ply))?;
             let path = dir.join(grid_file);
-            let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+            let data = crate::limits::read_cache_file(&path)?;
             let (grid, _) = crate::stages::visual_hull::parse_grid(&path, &data)?;
             let (zncc, seen) = graphcut::mean_vertex_consistency(
                 &job.sequence.cameras,

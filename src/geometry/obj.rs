@@ -62,13 +62,15 @@ pub fn write_obj(
 
 /// Reads an OBJ file's geometry (every object, polygons triangulated) as one mesh.
 pub fn read_obj(path: &Path) -> Result<TriMesh> {
-    crate::limits::check_mesh_file(path)?;
+    let bytes = crate::limits::read_mesh_file(path)?;
     let options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ..Default::default()
     };
-    let (models, _) = tobj::load_obj(path, &options)
+    // Materials are not read (the geometry is all the pipeline uses).
+    let no_materials = |_: &Path| Err(tobj::LoadError::OpenFileFailed);
+    let (models, _) = tobj::load_obj_buf(&mut std::io::Cursor::new(bytes), &options, no_materials)
         .map_err(|e| Error::invalid(path, format!("cannot read the OBJ file: {e}")))?;
     let mut mesh = TriMesh::default();
     for m in models {

@@ -360,8 +360,7 @@ pub fn parse_ply(path: &Path, data: &[u8]) -> Result<TriMesh> {
 
 /// Reads a PLY file.
 pub fn read_ply(path: &Path) -> Result<TriMesh> {
-    crate::limits::check_mesh_file(path)?;
-    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let data = crate::limits::read_mesh_file(path)?;
     parse_ply(path, &data)
 }
 

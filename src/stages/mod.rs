@@ -352,9 +352,7 @@ pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImag
             let path = dir
                 .join(frame_stem(frame))
                 .join(format!("{}.png", cam.name));
-            Ok(image::open(&path)
-                .map_err(|e| Error::invalid(&path, format!("cannot read the mask: {e}")))?
-                .to_luma8())
+            Ok(crate::dataset::decode(&path, None)?.to_luma8())
         })
         .collect()
 }
@@ -373,7 +371,7 @@ pub fn load_grid_spec(ctx: &Context, stage: &str, frame: u32) -> Result<GridSpec
     use std::io::Read;
     let (_, grid) = hull_files(frame);
     let path = ctx.cache.stage_dir(stage).join(grid);
-    let mut file = std::fs::File::open(&path).map_err(|e| Error::io(&path, e))?;
+    let mut file = crate::limits::open_regular(&path)?;
     let len = file.metadata().map_err(|e| Error::io(&path, e))?.len();
     let mut header = Vec::with_capacity(64);
     (&mut file)
@@ -387,7 +385,7 @@ pub fn load_grid_spec(ctx: &Context, stage: &str, frame: u32) -> Result<GridSpec
 pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Vec<f32>)> {
     let (_, grid) = hull_files(frame);
     let path = ctx.cache.stage_dir(stage).join(grid);
-    let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    let data = crate::limits::read_cache_file(&path)?;
     visual_hull::parse_grid(&path, &data)
 }
 
@@ -413,7 +411,7 @@ pub fn load_observed(ctx: &Context, frame: u32) -> Result<reliability::Observed>
         .cache
         .stage_dir("reliability")
         .join(reliability_files(frame).1);
-    let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    let data = crate::limits::read_cache_file(&path)?;
     reliability::Observed::parse(&path, &data)
 }
 

@@ -214,6 +214,6 @@ pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
 /// Reads the cached body model.
 pub fn load(ctx: &Context) -> Result<BodyModel> {
     let path = ctx.cache.stage_dir("model").join(MODEL_FILE);
-    let data = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    let data = crate::limits::read_cache_file(&path)?;
     BodyModel::parse(&path, &data)
 }
