@@ -172,7 +172,31 @@ impl Config {
                 ));
             }
         }
+        // The sequence folder holds the capture's inputs (frames, masks, ground truth).
+        for (key, place) in [("output", &config.output), ("cache", &config.cache)] {
+            let what = format!("{}: key '{key}'", path.display());
+            crate::fsutil::check_writable_place(&what, place, &[&config.sequence])?;
+        }
         Ok(config)
+    }
+
+    /// Refuses a file the pipeline is asked to write (`flag` names the option) inside the
+    /// capture's sequence folder or over its calibration file.
+    pub fn check_output_file(&self, flag: &str, file: &Path) -> Result<()> {
+        let target = crate::fsutil::resolved(file);
+        let inside = target.starts_with(crate::fsutil::resolved(&self.sequence));
+        if inside || target == crate::fsutil::resolved(&self.calibration) {
+            return Err(Error::Usage(format!(
+                "{flag} {}: would overwrite the capture's inputs ({}); write it elsewhere",
+                file.display(),
+                if inside {
+                    self.sequence.display()
+                } else {
+                    self.calibration.display()
+                }
+            )));
+        }
+        Ok(())
     }
 }
 

@@ -106,3 +106,48 @@ pub fn read_to_string(path: &Path) -> Result<String> {
     String::from_utf8(bytes)
         .map_err(|_| Error::invalid(path, "is not UTF-8 text; save it as UTF-8"))
 }
+
+/// `path` made absolute with its symlinks resolved as far as it exists (the rest, not yet
+/// created, appended as written), so that two spellings of one folder compare equal.
+pub fn resolved(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut existing = absolute.as_path();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(real) = existing.canonicalize() {
+            return rest.iter().rev().fold(real, |p, part| p.join(part));
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                existing = parent;
+            }
+            _ => return absolute,
+        }
+    }
+}
+
+/// Refuses a folder the pipeline writes (`what`: the key or flag naming it) that lies inside
+/// one of the capture's input folders `inputs`, or contains one, or is the root or the home
+/// folder: writing there could overwrite an input (a ground-truth `joints.csv`, a frame).
+pub fn check_writable_place(what: &str, place: &Path, inputs: &[&Path]) -> Result<()> {
+    let target = resolved(place);
+    let home = std::env::var_os("HOME").map(|h| resolved(Path::new(&h)));
+    if target.parent().is_none() || home.as_deref() == Some(target.as_path()) {
+        return Err(Error::Usage(format!(
+            "{what}: {} is the root or the home folder; give a folder of its own",
+            place.display()
+        )));
+    }
+    for input in inputs {
+        let input = resolved(input);
+        if target.starts_with(&input) || input.starts_with(&target) {
+            return Err(Error::Usage(format!(
+                "{what}: {} overlaps the capture's input folder {}; write outside the capture (for example beside pipeline.yaml)",
+                place.display(),
+                input.display()
+            )));
+        }
+    }
+    Ok(())
+}

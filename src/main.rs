@@ -527,7 +527,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             stage,
             out,
         } => {
-            let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
+            let config = Config::load(&file)?;
+            config.check_output_file("--out", &out)?;
+            let job = Job::load(config, Some(FrameRange::single(frame)))?;
             let img = hullpose::overlay::hull_beside_frame(&job, &stage, frame, camera.as_deref())?;
             hullpose::imageio::write_rgb(&out, &img)?;
             println!("wrote {}", out.display());

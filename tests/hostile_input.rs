@@ -325,3 +325,39 @@ fn non_regular_inputs_are_refused_by_name() {
     let (ok, err) = run_cli_bounded(&["check", "pipeline.yaml"], &run).unwrap();
     assert!(ok, "{err}");
 }
+
+/// Outputs that would land on the capture's inputs are refused before anything is written:
+/// `output:` or `cache:` inside (or around) the sequence folder, or the root, and `render
+/// --out` onto a frame or the calibration.
+#[test]
+fn outputs_over_inputs_are_refused() {
+    let outer = tempfile::tempdir().unwrap();
+    let run = outer.path().join("run");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    copy_tree(&repo.join("calib"), &run.join("calib"));
+    copy_tree(&repo.join("data"), &run.join("data"));
+    let yaml = std::fs::read_to_string(repo.join("pipeline.yaml")).unwrap();
+    let truth = run.join("data/tripod/ground_truth/joints.csv");
+    let before = std::fs::read(&truth).unwrap();
+    for (key, value) in [
+        ("output", "data/tripod/ground_truth"),
+        ("output", "./data/tripod/../tripod"),
+        ("cache", "data/tripod/cache"),
+        ("output", "data"),
+        ("cache", "/"),
+    ] {
+        let text = yaml.replace(&format!("{key}: {key}"), &format!("{key}: {value}"));
+        assert_ne!(text, yaml, "{key} not found in pipeline.yaml");
+        std::fs::write(run.join("p.yaml"), text).unwrap();
+        let (ok, _, err) = run_cli(&["run", "p.yaml"], &run);
+        assert!(!ok, "{key}: {value}: accepted");
+        assert!(err.contains(&format!("key '{key}'")), "{key}: {value}: {err}");
+    }
+    assert_eq!(std::fs::read(&truth).unwrap(), before);
+    std::fs::write(run.join("pipeline.yaml"), &yaml).unwrap();
+    for out in ["data/tripod/frames/cam01/000000.png", "calib/cameras.yaml"] {
+        let (ok, _, err) = run_cli(&["render", "pipeline.yaml", "--out", out], &run);
+        assert!(!ok && err.contains("--out") && err.contains("overwrite"), "{out}: {err}");
+    }
+    assert!(tree(&run).iter().all(|f| !f.contains("cache") && !f.contains("output")));
+}
