@@ -351,13 +351,21 @@ fn outputs_over_inputs_are_refused() {
         std::fs::write(run.join("p.yaml"), text).unwrap();
         let (ok, _, err) = run_cli(&["run", "p.yaml"], &run);
         assert!(!ok, "{key}: {value}: accepted");
-        assert!(err.contains(&format!("key '{key}'")), "{key}: {value}: {err}");
+        assert!(
+            err.contains(&format!("key '{key}'")),
+            "{key}: {value}: {err}"
+        );
     }
     assert_eq!(std::fs::read(&truth).unwrap(), before);
     std::fs::write(run.join("pipeline.yaml"), &yaml).unwrap();
     for out in ["data/tripod/frames/cam01/000000.png", "calib/cameras.yaml"] {
         let (ok, _, err) = run_cli(&["render", "pipeline.yaml", "--out", out], &run);
-        assert!(!ok && err.contains("--out") && err.contains("overwrite"), "{out}: {err}");
+        assert!(
+            !ok && err.contains("--out") && err.contains("overwrite"),
+            "{out}: {err}"
+        );
     }
-    assert!(tree(&run).iter().all(|f| !f.contains("cache") && !f.contains("output")));
+    assert!(tree(&run)
+        .iter()
+        .all(|f| !f.contains("cache") && !f.contains("output")));
 }
