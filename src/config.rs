@@ -183,9 +183,8 @@ impl Config {
     /// Refuses a file the pipeline is asked to write (`flag` names the option) inside the
     /// capture's sequence folder or over its calibration file.
     pub fn check_output_file(&self, flag: &str, file: &Path) -> Result<()> {
-        let target = crate::fsutil::resolved(file);
-        let inside = target.starts_with(crate::fsutil::resolved(&self.sequence));
-        if inside || target == crate::fsutil::resolved(&self.calibration) {
+        let inside = crate::fsutil::lies_within(file, &self.sequence);
+        if inside || crate::fsutil::lies_within(file, &self.calibration) {
             return Err(Error::Usage(format!(
                 "{flag} {}: would overwrite the capture's inputs ({}); write it elsewhere",
                 file.display(),

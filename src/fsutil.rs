@@ -127,6 +127,11 @@ pub fn resolved(path: &Path) -> PathBuf {
     }
 }
 
+/// Whether `path` is `folder` or lies inside it, however either is spelled ([`resolved`]).
+pub fn lies_within(path: &Path, folder: &Path) -> bool {
+    resolved(path).starts_with(resolved(folder))
+}
+
 /// Refuses a folder the pipeline writes (`what`: the key or flag naming it) that lies inside
 /// one of the capture's input folders `inputs`, or contains one, or is the root or the home
 /// folder: writing there could overwrite an input (a ground-truth `joints.csv`, a frame).
@@ -139,9 +144,8 @@ pub fn check_writable_place(what: &str, place: &Path, inputs: &[&Path]) -> Resul
             place.display()
         )));
     }
-    for input in inputs {
-        let input = resolved(input);
-        if target.starts_with(&input) || input.starts_with(&target) {
+    for &input in inputs {
+        if lies_within(place, input) || lies_within(input, place) {
             return Err(Error::Usage(format!(
                 "{what}: {} overlaps the capture's input folder {}; write outside the capture (for example beside pipeline.yaml)",
                 place.display(),

@@ -14,7 +14,7 @@ use std::collections::HashMap;
 /// Fits the frames of a sequence in tracking order, keeping each fitted frame's pose and
 /// diagnostics in memory for the frames that start from it.
 pub struct Tracker<'a> {
-    pub fitter: Fitter<'a>,
+    fitter: Fitter<'a>,
     /// The frames fitted (or read back) so far.
     done: HashMap<u32, (Pose, FitDiagnostics)>,
 }

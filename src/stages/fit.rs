@@ -207,6 +207,7 @@ pub(super) fn compute(
         &ctx.config.fit,
         &probe,
         &mut |frame, result, secs| {
+            // The run keeps no round log: dropped frame by frame, so it never grows.
             probe.take_rounds();
             let out = write_frame(ctx, &model, frame, result)?;
             commit(frame, out, secs)
