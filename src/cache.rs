@@ -34,14 +34,17 @@ impl KeyBuilder {
         self
     }
 
-    /// Adds a file's content (a regular file only; hashed as it is read, so its size does not
-    /// matter).
+    /// Adds a file's content, not its path (a regular file only; hashed as it is read, so its
+    /// size does not matter). Keys so depend on what the inputs hold, never on how their
+    /// paths are spelled: a project moved, copied or run by an absolute path (as the Slurm
+    /// scripts do) reuses its cache. Which file is which follows from the order of the calls
+    /// and the calibration, which every stage that reads frames adds too.
     pub fn add_file(&mut self, path: &Path) -> Result<&mut Self> {
         let file = crate::limits::open_regular(path)?;
         let mut hasher = blake3::Hasher::new();
         hasher.update_reader(file).map_err(|e| Error::io(path, e))?;
         let digest = hasher.finalize();
-        Ok(self.add(&path.to_string_lossy(), &digest.to_hex()))
+        Ok(self.add("file", &digest.to_hex()))
     }
 
     pub fn finish(&self) -> String {

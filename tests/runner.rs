@@ -372,3 +372,43 @@ fn bad_pipeline_input_gives_clear_errors() {
     let err = fails_cleanly(&rd, &["run", "missing.yaml"]);
     assert!(err.contains("missing.yaml"), "{err}");
 }
+
+/// Cache keys hold what the inputs contain, not how their paths are spelled: a project run
+/// by a relative path, by an absolute one, from inside its folder, and after the folder is
+/// moved computes everything once.
+#[test]
+fn keys_do_not_depend_on_how_the_project_path_is_spelled() {
+    let outer = tempfile::tempdir().unwrap();
+    let project = outer.path().join("pk");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    copy_tree(&repo.join("calib"), &project.join("calib"));
+    copy_tree(&repo.join("data"), &project.join("data"));
+    std::fs::copy(repo.join("pipeline.yaml"), project.join("pipeline.yaml")).unwrap();
+    let until = ["--until", "model", "--frames", "0..2"];
+    let run = |file: &Path, cwd: &Path| {
+        let mut args = vec!["run", file.to_str().unwrap()];
+        args.extend(until);
+        let (ok, out, err) = run_cli(&args, cwd);
+        assert!(ok, "{err}");
+        out
+    };
+    let first = run(Path::new("pk/pipeline.yaml"), outer.path());
+    assert!(!first.contains("0 artifacts computed"), "{first}");
+    let absolute = project.join("pipeline.yaml");
+    for (file, cwd) in [
+        (absolute.as_path(), outer.path()),
+        (Path::new("pipeline.yaml"), project.as_path()),
+    ] {
+        let out = run(file, cwd);
+        assert!(
+            out.contains("0 artifacts computed"),
+            "{}: {out}",
+            file.display()
+        );
+    }
+    let moved = outer.path().join("elsewhere/pk2");
+    std::fs::create_dir_all(moved.parent().unwrap()).unwrap();
+    std::fs::rename(&project, &moved).unwrap();
+    let out = run(Path::new("pipeline.yaml"), &moved);
+    assert!(out.contains("0 artifacts computed"), "moved: {out}");
+}

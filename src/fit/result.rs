@@ -22,7 +22,7 @@ pub enum FitStatus {
     Reference,
     /// Converged within the tolerance.
     Converged,
-    /// Stopped at `max_iterations`.
+    /// Stopped at the round cap (`fit.stop.max_rounds`, or the baselines' cap).
     IterationCap,
     /// Too little observed surface: the previous pose was kept.
     NoObservation,

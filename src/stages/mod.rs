@@ -165,7 +165,15 @@ pub const STAGES: &[StageDef] = &[
         about: "skin-bone body model from the reference frame's surface and the skeleton",
         inputs: &["graphcut"],
         format_version: 2,
-        params: |c| crate::yaml::to_string(&c.model).unwrap_or_default(),
+        // The mesh's content is in the key (`model::sources`), its path is not.
+        params: |c| {
+            let mesh = c.model.mesh.is_some().then(|| "given".into());
+            crate::yaml::to_string(&model::ModelParams {
+                mesh,
+                ..c.model.clone()
+            })
+            .unwrap_or_default()
+        },
         sources: model::sources,
         compute: Compute::Frame(model::compute),
         finish: None,
