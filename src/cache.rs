@@ -7,6 +7,7 @@
 //! orphan files that the next run overwrites.
 
 use crate::error::{Error, Result};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -65,6 +66,32 @@ pub struct Manifest {
     pub files: Vec<String>,
     /// Seconds the computation took.
     pub seconds: f64,
+    /// Each file's size and content hash as written ([`Cache::commit`] fills them in): a
+    /// file whose bytes differ later is damaged, and its artifact is recomputed.
+    #[serde(default)]
+    pub digests: Vec<FileDigest>,
+}
+
+/// A file's size (bytes) and blake3 hash (hex).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FileDigest {
+    pub bytes: u64,
+    pub blake3: String,
+}
+
+impl FileDigest {
+    /// The digest of the regular file at `path` (read as a stream).
+    pub fn of(path: &Path) -> Result<FileDigest> {
+        let file = crate::limits::open_regular(path)?;
+        let mut hasher = blake3::Hasher::new();
+        let bytes = std::io::copy(&mut std::io::BufReader::new(file), &mut hasher)
+            .map_err(|e| Error::io(path, e))?;
+        Ok(FileDigest {
+            bytes,
+            blake3: hasher.finalize().to_hex().to_string(),
+        })
+    }
 }
 
 /// State of one artifact against the key it should have.
@@ -74,6 +101,9 @@ pub enum ArtifactState {
     /// Present, but computed for other parameters or inputs.
     Stale,
     Missing,
+    /// Present for this key, but a file's bytes differ from those written (truncated,
+    /// overwritten) or the manifest records no digests: recomputed, never used.
+    Damaged,
 }
 
 /// The cache folder.
@@ -114,19 +144,43 @@ impl Cache {
             Some(m) => {
                 let dir = self.stage_dir(stage);
                 if m.key != key {
-                    ArtifactState::Stale
-                } else if m.files.iter().all(|f| dir.join(f).is_file()) {
+                    return ArtifactState::Stale;
+                }
+                if !m.files.iter().all(|f| dir.join(f).is_file()) {
+                    return ArtifactState::Missing;
+                }
+                // Sizes first (cheap: a truncated file), then the contents.
+                let intact = m.digests.len() == m.files.len()
+                    && m.files.iter().zip(&m.digests).all(|(f, d)| {
+                        std::fs::metadata(dir.join(f)).is_ok_and(|x| x.len() == d.bytes)
+                    })
+                    && m.files
+                        .par_iter()
+                        .zip(&m.digests)
+                        .all(|(f, d)| FileDigest::of(&dir.join(f)).is_ok_and(|x| &x == d));
+                if intact {
                     ArtifactState::UpToDate
                 } else {
-                    ArtifactState::Missing
+                    ArtifactState::Damaged
                 }
             }
         }
     }
 
-    /// Records an artifact whose files are written: the manifest goes last.
+    /// Records an artifact whose files are written, with their digests: the manifest goes
+    /// last.
     pub fn commit(&self, manifest: &Manifest) -> Result<()> {
-        let text = crate::yaml::to_string(manifest)?;
+        let dir = self.stage_dir(&manifest.stage);
+        let digests = manifest
+            .files
+            .iter()
+            .map(|f| FileDigest::of(&dir.join(f)))
+            .collect::<Result<_>>()?;
+        let manifest = Manifest {
+            digests,
+            ..manifest.clone()
+        };
+        let text = crate::yaml::to_string(&manifest)?;
         crate::fsutil::write_atomic(
             &self.manifest_path(&manifest.stage, manifest.frame),
             text.as_bytes(),
@@ -136,17 +190,28 @@ impl Cache {
     /// Removes temporary files that runs on this host left behind when they were
     /// interrupted: those whose writer (the host and process id in the name, see
     /// [`crate::fsutil`]) is no longer running. Temporaries of live runs (other shards on
-    /// the same cache) and of other hosts are left alone.
+    /// the same cache) and of other hosts are left alone. Only the folders the cache makes
+    /// are visited (the stage folders and one level below them, the silhouettes' frame
+    /// folders), and symlinks are never followed nor removed.
     pub fn sweep_temporaries(&self) {
-        fn walk(dir: &Path, host: &str) {
+        /// Folder levels below the cache root that the cache itself creates.
+        const DEPTH: usize = 2;
+        fn walk(dir: &Path, host: &str, depth: usize) {
             let Ok(entries) = std::fs::read_dir(dir) else {
                 return;
             };
             for e in entries.flatten() {
                 let p = e.path();
                 let name = e.file_name().to_string_lossy().into_owned();
-                if p.is_dir() {
-                    walk(&p, host);
+                let Ok(kind) = e.file_type() else {
+                    continue;
+                };
+                if kind.is_dir() {
+                    if depth < DEPTH {
+                        walk(&p, host, depth + 1);
+                    }
+                } else if !kind.is_file() {
+                    continue;
                 } else if let Some((writer_host, pid)) = crate::fsutil::temp_writer(&name) {
                     let alive = Path::new(&format!("/proc/{pid}")).exists();
                     if writer_host == host && !alive {
@@ -155,7 +220,7 @@ impl Cache {
                 }
             }
         }
-        walk(&self.root, &crate::fsutil::host_name());
+        walk(&self.root, &crate::fsutil::host_name(), 0);
     }
 
     /// Locks `frames` of this cache for one run: a second run that wants any of them is

@@ -185,10 +185,10 @@ impl Job {
             for f in frames {
                 let state = self.cache.state(stage.name, f, &keys[&(stage.name, f)]);
                 if state != ArtifactState::UpToDate {
-                    let what = if state == ArtifactState::Stale {
-                        "is stale"
-                    } else {
-                        "is missing"
+                    let what = match state {
+                        ArtifactState::Stale => "is stale",
+                        ArtifactState::Damaged => "is damaged (its files changed since written)",
+                        _ => "is missing",
                     };
                     return Err(Error::Usage(format!(
                         "the cached {} result of frame {f} {what}; run `pipeline run {}` first",
@@ -365,14 +365,28 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             });
             continue;
         }
+        let states: Vec<ArtifactState> = if forced {
+            vec![ArtifactState::Stale; frames.len()]
+        } else {
+            frames
+                .iter()
+                .map(|&f| job.cache.state(stage.name, f, &keys[&(stage.name, f)]))
+                .collect()
+        };
         let todo: Vec<u32> = frames
             .iter()
-            .copied()
-            .filter(|&f| {
-                forced
-                    || job.cache.state(stage.name, f, &keys[&(stage.name, f)])
-                        != ArtifactState::UpToDate
-            })
+            .zip(&states)
+            .filter(|(_, &s)| s != ArtifactState::UpToDate)
+            .map(|(&f, _)| f)
+            .collect();
+        let damaged: Vec<String> = frames
+            .iter()
+            .zip(&states)
+            .filter(|(_, &s)| s == ArtifactState::Damaged)
+            .map(|(f, _)| format!(
+                "{}: the cached artifact of frame {f} was damaged (its files changed since they were written); recomputed",
+                stage.name
+            ))
             .collect();
         let progress = bar(todo.len(), stage.name);
         let commit = |f: u32, files: Vec<String>, seconds: f64| -> Result<()> {
@@ -383,6 +397,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
                 format_version: stage.format_version,
                 files,
                 seconds,
+                digests: Vec::new(),
             })?;
             progress.inc(1);
             Ok(())
@@ -409,6 +424,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             }
         };
         progress.finish_and_clear();
+        warnings.insert(0, damaged);
         let mut outputs = Vec::new();
         if let Some(finish) = stage.finish {
             let finished = finish(&ctx, &frames)?;
@@ -446,7 +462,7 @@ pub fn status(job: &Job) -> Result<Vec<StageStatus>> {
                 match job.cache.state(s.name, f, &keys[&(s.name, f)]) {
                     ArtifactState::UpToDate => st.up_to_date += 1,
                     ArtifactState::Stale => st.stale += 1,
-                    ArtifactState::Missing => st.missing += 1,
+                    ArtifactState::Missing | ArtifactState::Damaged => st.missing += 1,
                 }
             }
             st

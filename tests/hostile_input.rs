@@ -369,3 +369,45 @@ fn outputs_over_inputs_are_refused() {
         .iter()
         .all(|f| !f.contains("cache") && !f.contains("output")));
 }
+
+/// The sweep of dead runs' temporary files follows no symlink: a symlink loop in the cache
+/// does not hang a run, and a dead run's temporary file behind a symlink to a folder outside
+/// the cache survives, while the same file inside the cache is removed.
+#[test]
+fn the_temporary_sweep_stays_inside_the_cache() {
+    let outer = tempfile::tempdir().unwrap();
+    let run = outer.path().join("run");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    copy_tree(&repo.join("calib"), &run.join("calib"));
+    copy_tree(&repo.join("data"), &run.join("data"));
+    std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+    let args = [
+        "run",
+        "pipeline.yaml",
+        "--until",
+        "silhouette",
+        "--frames",
+        "0..0",
+    ];
+    let (ok, err) = run_cli_bounded(&args, &run).unwrap();
+    assert!(ok, "{err}");
+    let mut child = std::process::Command::new("true").spawn().unwrap();
+    let dead = child.id();
+    child.wait().unwrap();
+    let temp = format!(".x.tmp-{}-{dead}-0", hullpose::fsutil::host_name());
+    let outside = outer.path().join("outside");
+    std::fs::create_dir_all(&outside).unwrap();
+    std::fs::write(outside.join(&temp), "keep").unwrap();
+    let cache = run.join("cache");
+    std::fs::write(cache.join("silhouette").join(&temp), "stale").unwrap();
+    std::os::unix::fs::symlink(&outside, cache.join("silhouette/elsewhere")).unwrap();
+    std::os::unix::fs::symlink(&cache, cache.join("loop")).unwrap();
+    std::os::unix::fs::symlink("..", cache.join("silhouette/up")).unwrap();
+    let (ok, err) = run_cli_bounded(&args, &run).expect("the run did not end within 60 s");
+    assert!(ok, "{err}");
+    assert!(
+        outside.join(&temp).exists(),
+        "a file outside the cache was removed"
+    );
+    assert!(!cache.join("silhouette").join(&temp).exists());
+}

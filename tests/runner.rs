@@ -412,3 +412,72 @@ fn keys_do_not_depend_on_how_the_project_path_is_spelled() {
     let out = run(Path::new("pipeline.yaml"), &moved);
     assert!(out.contains("0 artifacts computed"), "moved: {out}");
 }
+
+/// A cached file changed after it was written (one byte flipped, or cut short) is never
+/// used: `status` counts its artifact as missing and the next run recomputes it with a note,
+/// for every kind of artifact.
+#[test]
+fn damaged_cache_files_are_recomputed_with_a_note() {
+    let outer = tempfile::tempdir().unwrap();
+    let project = outer.path().join("pk");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    copy_tree(&repo.join("calib"), &project.join("calib"));
+    copy_tree(&repo.join("data"), &project.join("data"));
+    std::fs::copy(repo.join("pipeline.yaml"), project.join("pipeline.yaml")).unwrap();
+    let args = ["run", "pipeline.yaml", "--frames", "0..1", "--until", "fit"];
+    let (ok, _, err) = run_cli(&args, &project);
+    assert!(ok, "{err}");
+    let cache = project.join("cache");
+    // One file of each kind: flipped bytes in the middle, or cut short.
+    let damaged = [
+        ("silhouette", "000001/cam00.png", false),
+        ("visual_hull", "000001.grid", false),
+        ("visual_hull", "000000.ply", true),
+        ("graphcut", "000001.ply", false),
+        ("reliability", "000001.obs", false),
+        ("model", "model.hpm", true),
+        ("fit", "000001.pose.csv", false),
+    ];
+    for (stage, file, truncate) in damaged {
+        let path = cache.join(stage).join(file);
+        let mut bytes = std::fs::read(&path).unwrap();
+        if truncate {
+            bytes.truncate(bytes.len() / 2);
+        } else {
+            let mid = bytes.len() / 2;
+            bytes[mid] ^= 0xff;
+        }
+        std::fs::write(&path, bytes).unwrap();
+    }
+    let (_, status, _) = run_cli(&["status", "pipeline.yaml", "--frames", "0..1"], &project);
+    for stage in [
+        "silhouette",
+        "visual_hull",
+        "graphcut",
+        "reliability",
+        "model",
+        "fit",
+    ] {
+        let row = status
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(stage))
+            .unwrap_or_else(|| panic!("{status}"));
+        let missing: usize = row.split_whitespace().last().unwrap().parse().unwrap();
+        assert!(missing >= 1, "{stage} not flagged: {status}");
+    }
+    let (ok, out, err) = run_cli(&args, &project);
+    assert!(ok, "{err}");
+    let text = format!("{out}{err}");
+    for (stage, file, _) in damaged {
+        let frame = if file.starts_with("000001") { 1 } else { 0 };
+        assert!(
+            text.contains(&format!(
+                "{stage}: the cached artifact of frame {frame} was damaged"
+            )),
+            "{stage}/{file}: {text}"
+        );
+    }
+    // Everything is whole again.
+    let (_, out, _) = run_cli(&args, &project);
+    assert!(!out.contains("damaged"), "{out}");
+}
