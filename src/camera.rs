@@ -285,18 +285,32 @@ pub struct Calibration {
     pub warnings: Vec<String>,
 }
 
+/// The longest camera or bone name, bytes.
+pub const MAX_NAME_BYTES: usize = 100;
+
 /// Camera names become folder names: refuse anything that is not a plain file name.
 pub fn check_name(name: &str) -> std::result::Result<(), String> {
     if name.is_empty() {
         return Err("the name is empty".into());
     }
+    // Shown escaped: a name may hold terminal escape sequences.
+    let shown = name.escape_debug();
     if name == "." || name == ".." || name.contains(['/', '\\']) {
         return Err(format!(
-            "the name '{name}' is used as a folder name and must not contain '/', '\\' or be '.' or '..'"
+            "the name '{shown}' is used as a folder name and must not contain '/', '\\' or be '.' or '..'"
         ));
     }
     if name.chars().any(|c| c.is_control()) {
         return Err(format!("the name {name:?} contains control characters"));
+    }
+    // Names become file names (`<name>.png`, `<name>.tmp-...`): well under the usual
+    // 255-byte limit.
+    if name.len() > MAX_NAME_BYTES {
+        return Err(format!(
+            "the name '{}...' is {} bytes long; names become file names, keep them to {MAX_NAME_BYTES} bytes",
+            shown.to_string().chars().take(20).collect::<String>(),
+            name.len()
+        ));
     }
     Ok(())
 }
@@ -331,7 +345,9 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
     let mut warnings = Vec::new();
     let mut cameras = Vec::with_capacity(file.cameras.len());
     for e in file.cameras {
-        let bad = |msg: String| Error::invalid(path, format!("camera '{}': {msg}", e.name));
+        let bad = |msg: String| {
+            Error::invalid(path, format!("camera '{}': {msg}", e.name.escape_debug()))
+        };
         check_name(&e.name).map_err(&bad)?;
         // Names become folder names: on a case-insensitive filesystem "Cam0" and "cam0"
         // would be one folder.

@@ -163,12 +163,14 @@ impl Config {
         ] {
             let ok = if dir { p.is_dir() } else { p.is_file() };
             if !ok {
+                let problem = match (p.exists(), dir) {
+                    (false, _) => "does not exist (paths are relative to the pipeline file)",
+                    (true, true) => "is not a folder; give the sequence's folder",
+                    (true, false) => "is not a regular file; give the calibration file's path",
+                };
                 return Err(Error::invalid(
                     path,
-                    format!(
-                        "key '{key}': {} does not exist (paths are relative to the pipeline file)",
-                        p.display()
-                    ),
+                    format!("key '{key}': {} {problem}", p.display()),
                 ));
             }
         }

@@ -76,7 +76,7 @@ pub fn decode(path: &Path, expected: Option<&Camera>) -> Result<image::DynamicIm
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(w);
     limits.max_image_height = Some(h);
-    limits.max_alloc = Some(crate::limits::image_alloc_bytes());
+    limits.max_alloc = Some(crate::limits::image_alloc_bytes()?);
     reader.limits(limits);
     reader
         .decode()

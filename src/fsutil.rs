@@ -65,7 +65,19 @@ pub fn temp_writer(file_name: &str) -> Option<(String, u32)> {
 
 /// Creates `dir` and its parents.
 pub fn create_dir_all(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))
+    std::fs::create_dir_all(dir).map_err(|e| {
+        // The folder itself, or one of its parents, is a file.
+        match dir.ancestors().find(|a| a.exists() && !a.is_dir()) {
+            Some(file) => Error::invalid(
+                file,
+                format!(
+                    "is a file, but a folder is needed here (for {}); move the file or choose another folder",
+                    dir.display()
+                ),
+            ),
+            None => Error::io(dir, e),
+        }
+    })
 }
 
 /// Writes `path` atomically with whatever `fill` writes into the buffered temporary file.

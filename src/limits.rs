@@ -36,46 +36,53 @@ const IMAGE: Cap = Cap {
 };
 
 impl Cap {
-    /// The cap in units (the environment variable when it holds a positive number).
-    fn units(&self) -> u64 {
-        std::env::var(self.env)
-            .ok()
-            .and_then(|v| v.trim().parse::<u64>().ok())
-            .filter(|&v| v > 0)
-            .unwrap_or(self.default)
+    /// The cap in units: the environment variable when set (a positive whole number, else
+    /// an error naming it), the default otherwise.
+    fn units(&self) -> Result<u64> {
+        let Some(value) = std::env::var_os(self.env) else {
+            return Ok(self.default);
+        };
+        let text = value.to_string_lossy();
+        match text.trim().parse::<u64>() {
+            Ok(n) if n > 0 => Ok(n),
+            _ => Err(self.bad_variable(&text)),
+        }
     }
 
-    fn bytes(&self) -> u64 {
-        self.units().saturating_mul(self.unit)
+    /// The error for an environment variable that holds no cap.
+    fn bad_variable(&self, value: &str) -> Error {
+        Error::Usage(format!(
+            "the environment variable {}={value:?} is not a positive whole number of {}; set \
+             it to one (the default is {}) or unset it",
+            self.env, self.unit_name, self.default
+        ))
     }
 
-    /// The error for a file that holds more than the cap (its size unknown beyond it).
-    fn refuse_over(&self, path: &Path, what: &str) -> Error {
-        Error::invalid(
-            path,
-            format!(
-                "{what} holds more than the {} {} allowed; if the file is genuine, raise the \
-                 cap with the environment variable {}",
-                self.units(),
-                self.unit_name,
-                self.env
-            ),
-        )
+    /// The cap in the base unit (bytes, pixels).
+    fn limit(&self) -> Result<u64> {
+        Ok(self.units()?.saturating_mul(self.unit))
     }
 
-    fn refuse(&self, path: &Path, what: &str, size: u64) -> Error {
-        Error::invalid(
-            path,
-            format!(
-                "{what} is {:.1} {}, more than the {} {} allowed; if the file is genuine, \
-                 raise the cap with the environment variable {}",
+    /// The error for a file over the cap (`size` in the base unit, when known).
+    fn refuse(&self, path: &Path, what: &str, size: Option<u64>) -> Result<Error> {
+        let amount = match size {
+            Some(size) => format!(
+                "is {:.1} {},",
                 size as f64 / self.unit as f64,
-                self.unit_name,
-                self.units(),
+                self.unit_name
+            ),
+            None => "holds".to_string(),
+        };
+        Ok(Error::invalid(
+            path,
+            format!(
+                "{what} {amount} more than the {} {} allowed; if the file is genuine, raise the \
+                 cap with the environment variable {}",
+                self.units()?,
                 self.unit_name,
                 self.env
             ),
-        )
+        ))
     }
 }
 
@@ -127,13 +134,13 @@ pub fn open_regular(path: &Path) -> Result<std::fs::File> {
 fn read_capped(path: &Path, cap: &Cap, what: &str) -> Result<Vec<u8>> {
     use std::io::Read;
     let file = open_regular(path)?;
-    let limit = cap.bytes();
+    let limit = cap.limit()?;
     let mut bytes = Vec::new();
     file.take(limit.saturating_add(1))
         .read_to_end(&mut bytes)
         .map_err(|e| Error::io(path, e))?;
     if bytes.len() as u64 > limit {
-        return Err(cap.refuse_over(path, what));
+        return Err(cap.refuse(path, what, None)?);
     }
     Ok(bytes)
 }
@@ -156,18 +163,14 @@ pub fn read_mesh_file(path: &Path) -> Result<Vec<u8>> {
 /// Checks an image's dimensions (from its header) before it is decoded.
 pub fn check_image(path: &Path, width: u32, height: u32) -> Result<()> {
     let pixels = width as u64 * height as u64;
-    if pixels > IMAGE.units().saturating_mul(IMAGE.unit) {
-        return Err(IMAGE.refuse(path, &format!("the image ({width}x{height})"), pixels));
+    if pixels > IMAGE.limit()? {
+        return Err(IMAGE.refuse(path, &format!("the image ({width}x{height})"), Some(pixels))?);
     }
     Ok(())
 }
 
 /// The largest allocation an image decoder may make, bytes: the pixel cap at 4 bytes per
 /// pixel (RGBA 8-bit) plus slack.
-pub fn image_alloc_bytes() -> u64 {
-    IMAGE
-        .units()
-        .saturating_mul(IMAGE.unit)
-        .saturating_mul(4)
-        .saturating_add(64 << 20)
+pub fn image_alloc_bytes() -> Result<u64> {
+    Ok(IMAGE.limit()?.saturating_mul(4).saturating_add(64 << 20))
 }

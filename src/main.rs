@@ -608,11 +608,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
         }
         Command::Check { file } => {
-            let config = Config::load(&file)?;
-            let seq = hullpose::dataset::Sequence::open_with_calibration(
-                &config.calibration,
-                &config.sequence,
-            )?;
+            // The same checks as `run` before its first stage.
+            let job = Job::load(Config::load(&file)?, None)?;
+            job.validate()?;
+            let seq = &job.sequence;
             for w in &seq.warnings {
                 eprintln!("warning: {w}");
             }

@@ -98,6 +98,36 @@ impl Job {
     }
 
     /// The reference frame t0 of the sequence's skeleton, if it has one.
+    /// Everything about the capture and pipeline.yaml that a run would otherwise find only
+    /// after minutes of work, checked at once: `pipeline run` checks it before its first
+    /// stage and `pipeline check` checks the same. The carving needs at least two cameras;
+    /// every camera's image fits the image cap; the skeleton's reference frame is a frame of
+    /// the sequence; `export.overlay_cameras` names calibrated cameras.
+    pub fn validate(&self) -> Result<()> {
+        let calibration = &self.config.calibration;
+        let cameras = &self.sequence.cameras;
+        if cameras.len() < 2 {
+            return Err(Error::invalid(
+                calibration,
+                format!(
+                    "holds {} camera; the visual hull carves with at least two cameras (a ring of eight or more gives a useful hull)",
+                    cameras.len()
+                ),
+            ));
+        }
+        for cam in cameras {
+            crate::limits::check_image(calibration, cam.width, cam.height)
+                .map_err(|e| Error::Usage(format!("camera '{}': {e}", cam.name)))?;
+        }
+        self.reference_frame()?;
+        for name in &self.config.export.overlay_cameras {
+            crate::overlay::camera_index(&self.sequence, calibration, name).map_err(|e| {
+                Error::invalid(&self.config.path, format!("export.overlay_cameras: {e}"))
+            })?;
+        }
+        Ok(())
+    }
+
     pub fn reference_frame(&self) -> Result<Option<u32>> {
         let Some(skeleton) = self.sequence.skeleton()? else {
             return Ok(None);
@@ -312,6 +342,7 @@ pub fn bar(len: usize, stage: &str) -> ProgressBar {
 /// Runs the pipeline: computes what is stale (or forced), reuses the rest.
 pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     let plan = plan(opts)?;
+    job.validate()?;
     let wants_reference = plan
         .iter()
         .any(|(s, _)| matches!(s.scope, Scope::Reference | Scope::Tracked));

@@ -411,3 +411,184 @@ fn the_temporary_sweep_stays_inside_the_cache() {
     );
     assert!(!cache.join("silhouette").join(&temp).exists());
 }
+
+/// What `run` would refuse only after minutes of work, `check` refuses at once, and `run`
+/// before its first stage: one camera, a reference frame outside the sequence, an overlay
+/// camera that does not exist, images over the pixel cap, a camera name too long for a
+/// file name.
+#[test]
+fn check_refuses_what_run_would_refuse_later() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let calib_text = std::fs::read_to_string(repo.join("calib/cameras.yaml")).unwrap();
+    let second = calib_text.find("  - name: cam01").unwrap();
+    let long_name = "c".repeat(251);
+    type Edit = Box<dyn Fn(&Path)>;
+    let cases: Vec<(&str, Edit, &str)> = vec![
+        (
+            "one camera",
+            Box::new(move |run: &Path| {
+                std::fs::write(run.join("calib/cameras.yaml"), &calib_text[..second]).unwrap()
+            }),
+            "at least two cameras",
+        ),
+        (
+            "reference frame 99",
+            Box::new(|run: &Path| {
+                let path = run.join("data/tripod/skeleton.yaml");
+                let text = std::fs::read_to_string(&path).unwrap();
+                std::fs::write(
+                    &path,
+                    text.replace("reference_frame: 0", "reference_frame: 99"),
+                )
+                .unwrap()
+            }),
+            "reference_frame 99",
+        ),
+        (
+            "overlay camera",
+            Box::new(|run: &Path| {
+                let path = run.join("pipeline.yaml");
+                let text = std::fs::read_to_string(&path).unwrap();
+                let text = text.replace("export:\n", "export:\n  overlay_cameras: [nope]\n");
+                std::fs::write(&path, text).unwrap()
+            }),
+            "overlay_cameras",
+        ),
+        (
+            "3600 megapixels",
+            Box::new(|run: &Path| {
+                let path = run.join("calib/cameras.yaml");
+                let text = std::fs::read_to_string(&path).unwrap();
+                let text = text.replacen(
+                    "width: 256\n    height: 192",
+                    "width: 60000\n    height: 60000",
+                    1,
+                );
+                std::fs::write(&path, text).unwrap();
+                for folder in ["frames", "masks"] {
+                    let dir = run.join("data/tripod").join(folder).join("cam00");
+                    for e in std::fs::read_dir(&dir).unwrap() {
+                        std::fs::write(e.unwrap().path(), png_claiming(60000, 60000)).unwrap();
+                    }
+                }
+                let plate = run.join("data/tripod/background/cam00.png");
+                std::fs::write(plate, png_claiming(60000, 60000)).unwrap();
+            }),
+            "HULLPOSE_MAX_IMAGE_MEGAPIXELS",
+        ),
+        (
+            "a 251-character camera name",
+            Box::new(move |run: &Path| {
+                let path = run.join("calib/cameras.yaml");
+                let text = std::fs::read_to_string(&path).unwrap();
+                std::fs::write(
+                    &path,
+                    text.replacen("name: cam00", &format!("name: {long_name}"), 1),
+                )
+                .unwrap();
+                for folder in ["frames", "masks"] {
+                    let dir = run.join("data/tripod").join(folder);
+                    let _ = std::fs::rename(dir.join("cam00"), dir.join(&long_name));
+                }
+            }),
+            "bytes long",
+        ),
+    ];
+    for (what, edit, expect) in cases {
+        let outer = tempfile::tempdir().unwrap();
+        let run = outer.path().join("run");
+        copy_tree(&repo.join("calib"), &run.join("calib"));
+        copy_tree(&repo.join("data"), &run.join("data"));
+        std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+        edit(&run);
+        for command in ["check", "run"] {
+            let (ok, err) = run_cli_bounded(&[command, "pipeline.yaml"], &run).unwrap();
+            assert!(!ok, "{what}: {command} accepted it");
+            assert!(err.contains(expect), "{what}: {command}: {err}");
+        }
+        assert!(
+            !run.join("cache").exists(),
+            "{what}: run computed something"
+        );
+    }
+}
+
+/// Errors say what is wrong: a non-finite vertex (not "missing properties"), a calibration
+/// path that is a folder, a cache path that is a file, an environment cap that is no
+/// number, and a camera name with an escape character, never echoed raw.
+#[test]
+fn messages_say_what_is_wrong() {
+    let outer = tempfile::tempdir().unwrap();
+    for (value, text) in [("nan", "nan"), ("inf", "inf")] {
+        let path = outer.path().join(format!("{value}.ply"));
+        std::fs::write(
+            &path,
+            format!("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 {text}\n0 1 0\n3 0 1 2\n"),
+        )
+        .unwrap();
+        let err = hullpose::geometry::ply::read_ply(&path)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("vertex 1 has a non-finite coordinate"),
+            "{value}: {err}"
+        );
+    }
+    let run = outer.path().join("run");
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    copy_tree(&repo.join("calib"), &run.join("calib"));
+    copy_tree(&repo.join("data"), &run.join("data"));
+    let yaml = std::fs::read_to_string(repo.join("pipeline.yaml")).unwrap();
+    let check = |text: &str, env: Option<(&str, &str)>| -> String {
+        std::fs::write(run.join("p.yaml"), text).unwrap();
+        let mut command = std::process::Command::new(pipeline_bin());
+        command
+            .args(["run", "p.yaml", "--until", "silhouette"])
+            .current_dir(&run);
+        if let Some((k, v)) = env {
+            command.env(k, v);
+        }
+        let out = command.output().unwrap();
+        assert!(!out.status.success(), "{text}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = check(&yaml.replace("calib/cameras.yaml", "calib"), None);
+    assert!(err.contains("is not a regular file"), "{err}");
+    std::fs::write(run.join("cache"), "a file").unwrap();
+    let err = check(&yaml, None);
+    assert!(err.contains("is a file, but a folder is needed"), "{err}");
+    std::fs::remove_file(run.join("cache")).unwrap();
+    let err = check(&yaml, Some(("HULLPOSE_MAX_TEXT_MB", "lots")));
+    assert!(
+        err.contains("HULLPOSE_MAX_TEXT_MB") && err.contains("lots"),
+        "{err}"
+    );
+    let calib = run.join("calib/cameras.yaml");
+    let text = std::fs::read_to_string(&calib).unwrap();
+    std::fs::write(
+        &calib,
+        text.replacen("name: cam00", "name: \"cam\\e[31m00\"", 1),
+    )
+    .unwrap();
+    let err = check(&yaml, None);
+    assert!(
+        err.contains("control characters") && !err.contains('\u{1b}'),
+        "{err:?}"
+    );
+}
+
+/// YAML whose brackets nest 200,000 levels deep (400 KB) is refused by its depth, not
+/// parsed (the parser took 86 s to reject it).
+#[test]
+fn deeply_nested_yaml_is_refused_by_its_depth() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!(
+        "calibration: x\nsequence: y\nfit: {}{}\n",
+        "[".repeat(200_000),
+        "]".repeat(200_000)
+    );
+    std::fs::write(dir.path().join("deep.yaml"), text).unwrap();
+    let (ok, err) = run_cli_bounded(&["check", "deep.yaml"], dir.path())
+        .expect("the check did not end within 60 s");
+    assert!(!ok && err.contains("nest 200000 levels deep"), "{err}");
+}

@@ -312,16 +312,17 @@ pub fn parse_ply(path: &Path, data: &[u8]) -> Result<TriMesh> {
             mesh.vertices.reserve(e.count);
         }
         for _ in 0..e.count {
-            let mut xyz = [f64::NAN; 3];
+            // None: the property is missing.
+            let mut xyz: [Option<f64>; 3] = [None; 3];
             for p in &e.properties {
                 match p {
                     Property::Scalar(name, t) => {
                         let v = body.next(*t).ok_or_else(truncated)?;
                         if is_vertex {
                             match name.as_str() {
-                                "x" => xyz[0] = v,
-                                "y" => xyz[1] = v,
-                                "z" => xyz[2] = v,
+                                "x" => xyz[0] = Some(v),
+                                "y" => xyz[1] = Some(v),
+                                "z" => xyz[2] = Some(v),
                                 _ => {}
                             }
                         }
@@ -342,10 +343,16 @@ pub fn parse_ply(path: &Path, data: &[u8]) -> Result<TriMesh> {
                 }
             }
             if is_vertex {
-                if xyz.iter().any(|v| v.is_nan()) {
+                let [Some(x), Some(y), Some(z)] = xyz else {
                     return Err(bad("vertices need x, y and z properties".into()));
+                };
+                if ![x, y, z].iter().all(|v| v.is_finite()) {
+                    return Err(bad(format!(
+                        "vertex {} has a non-finite coordinate ({x}, {y}, {z})",
+                        mesh.vertices.len()
+                    )));
                 }
-                mesh.vertices.push(Vector3::new(xyz[0], xyz[1], xyz[2]));
+                mesh.vertices.push(Vector3::new(x, y, z));
             }
         }
     }
