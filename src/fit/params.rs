@@ -133,7 +133,8 @@ pub struct RestartParams {
     pub energy_ratio: f64,
     /// A fit is also lost when a bone's head-to-tail direction ends more than this many
     /// degrees from its direction both in the start pose and in the previous frame's pose
-    /// (a limb folded back onto itself). Default 45.
+    /// (a limb folded back onto itself), unless its score fell below the previous frame's
+    /// (a fast turn the observation explains). Default 45.
     pub turn_deg: f64,
     /// Rounds per restart at most, as a multiple of the method's round cap. Default 2.
     pub rounds_factor: usize,
