@@ -179,7 +179,8 @@ enum Command {
         #[arg(long, value_parser = hullpose::calib_import::parse_size)]
         size: Option<(u32, u32)>,
     },
-    /// Check a capture against its calibration and report what it holds.
+    /// Check a capture against its calibration, with every check `run` makes before its
+    /// first stage, and report what it holds.
     Check {
         /// The pipeline.yaml naming the calibration and the sequence.
         file: PathBuf,
