@@ -499,7 +499,7 @@ pub fn track(
         &tracked.steps,
         rounds.max(1) as f64,
         seconds,
-        tracked.nearest_reused,
+        tracked.reused,
     );
     let _ = writeln!(
         out,
@@ -585,21 +585,21 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
         &probe.timings(),
         rounds,
         total,
-        probe.nearest_reused_share(),
+        probe.reused_shares(),
     );
     Ok(out)
 }
 
 /// Writes a fit's milliseconds per round of each step, their sum and the wall clock
-/// (`wall` seconds over `rounds`), then the shares of nearest answers `reused` (model->observed,
-/// observed->model). rho_c and the nearest searches run side by side, so the sum exceeds the
+/// (`wall` seconds over `rounds`), then the shares of answers `reused` (nearest
+/// model->observed and observed->model, rho_c's lists). rho_c and the nearest searches run side by side, so the sum exceeds the
 /// wall clock by their overlap.
 fn write_round_steps(
     out: &mut String,
     steps: &[(&'static str, f64)],
     rounds: f64,
     wall: f64,
-    reused: [f64; 2],
+    reused: [f64; 3],
 ) {
     let mut sum = 0.0;
     for (step, secs) in steps {
@@ -625,8 +625,9 @@ fn write_round_steps(
     );
     let _ = writeln!(
         out,
-        "  nearest answers reused from an earlier round: {:.1}% model->observed, {:.1}% observed->model",
+        "  reused from an earlier round: nearest {:.1}% model->observed, {:.1}% observed->model; rho_c lists {:.1}%",
         100.0 * reused[0],
-        100.0 * reused[1]
+        100.0 * reused[1],
+        100.0 * reused[2]
     );
 }

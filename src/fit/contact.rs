@@ -78,6 +78,8 @@ pub struct ContactTimes {
     pub rebuilding: f64,
     /// Scanning every list for the nearest partner, and the weights.
     pub scanning: f64,
+    /// How many vertices' lists were built again.
+    pub rebuilt: usize,
 }
 
 /// The model's parts and the rule's exclusions, prepared once per sequence.
@@ -99,11 +101,12 @@ pub struct ContactSearch {
 
 /// The partner lists' margin m, metres: a vertex's list holds the allowed vertices within
 /// min(nearest + 2 m, cut-off + m) of it, and serves while it and the parts near it have
-/// moved less than m (see [`ContactSearch::weights`]).
+/// moved less than m, and the parts farther away less than their gap allows (see
+/// [`ContactSearch::weights`]).
 const PARTNER_MARGIN: f64 = 0.015;
 
-/// At most this many poses at which lists were built are kept; beyond it, every list is
-/// rebuilt at the current pose.
+/// At most this many poses at which lists were built are kept; beyond it, the lists of the
+/// oldest are rebuilt at the current pose with the stale ones.
 const MAX_EPOCHS: usize = 8;
 
 /// Every vertex's possible partners, built at earlier poses ("epochs").
@@ -112,9 +115,10 @@ struct PartnerLists {
     epochs: Vec<Vec<Vector3<f64>>>,
     /// The epoch each vertex's list was built at.
     epoch_of: Vec<u8>,
-    /// Bit b: part b's bounding box lay within cut-off + 2 m of the vertex when its list
-    /// was built (parts from the 64th on always count as near).
-    near: Vec<u64>,
+    /// Entry `v * parts + b`: how far vertex v and part b may move between them (the sum
+    /// of their largest motions) before v's list stops serving, metres; infinite for parts
+    /// v does not search.
+    allowance: Vec<f32>,
     lists: Vec<Vec<u32>>,
 }
 
@@ -148,15 +152,6 @@ fn nearest_listed(listed: &[u32], keys: &[[f32; 3]], v: usize) -> (f64, usize) {
         (f64::INFINITY, usize::MAX)
     } else {
         (best2 as f64, best as usize)
-    }
-}
-
-/// Part b's bit in [`PartnerLists::near`] (none from the 64th part on).
-fn part_bit(b: usize) -> u64 {
-    if b < 64 {
-        1 << b
-    } else {
-        0
     }
 }
 
@@ -194,13 +189,15 @@ impl ContactSearch {
     ///
     /// Exact, with partner lists kept from earlier rounds. Let vertex v's list be built when
     /// its nearest allowed vertex lay at d0, holding every allowed vertex then within
-    /// r = min(d0 + 2 m, cut-off + m). Since then v moved dv and each part b's vertices at
-    /// most D_b; a pair's distance changed by at most s_b = dv + D_b. The list still holds
-    /// v's nearest allowed vertex w whenever that lies within the cut-off, provided s_b <= m
-    /// for the parts b that were near v (box within cut-off + 2 m) and s_b < 2 m for the
-    /// others: w's part was near (else it is still beyond cut-off + 2 m - s_b > cut-off),
-    /// and w then lay within d1(w) + m <= d1(old nearest) + m <= d0 + 2 m, and within
-    /// cut-off + m. Vertices whose lists fail this get new lists at the current pose.
+    /// r = min(d0 + 2 m, cut-off + m), and part b's bounding box at a gap G_b from v.
+    /// Since then v moved dv and each part b's vertices at most D_b; a pair's distance
+    /// changed by at most s_b = dv + D_b. The list still holds v's nearest allowed vertex w
+    /// whenever that lies within the cut-off, provided s_b <= m for the parts with
+    /// G_b <= cut-off + m and s_b < G_b - cut-off for the others: w's part is one of the
+    /// former (the others' vertices all still lie beyond G_b - s_b > cut-off), and w then
+    /// lay within d1(w) + m <= d1(old nearest) + m <= d0 + 2 m, and within cut-off + m (the
+    /// old nearest, at d0 <= r, is in such a part too). Vertices whose lists fail this get
+    /// new lists at the current pose.
     /// Also returns where the call's time went.
     pub fn weights(
         &self,
@@ -212,7 +209,7 @@ impl ContactSearch {
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         let started = std::time::Instant::now();
-        let stale: Vec<u32> = match cache.as_ref() {
+        let mut stale: Vec<u32> = match cache.as_ref() {
             Some(c) if c.epoch_of.len() == posed.len() => self.stale_lists(c, posed),
             _ => (0..posed.len() as u32).collect(),
         };
@@ -224,16 +221,21 @@ impl ContactSearch {
                 _ => cache.insert(PartnerLists {
                     epochs: Vec::new(),
                     epoch_of: vec![0; posed.len()],
-                    near: vec![0; posed.len()],
+                    allowance: vec![0.0; posed.len() * self.parts.len()],
                     lists: vec![Vec::new(); posed.len()],
                 }),
             };
-            if c.epochs.len() < MAX_EPOCHS {
-                self.renew(c, &stale, posed, &keys);
-            } else {
-                let all: Vec<u32> = (0..posed.len() as u32).collect();
-                self.renew(c, &all, posed, &keys);
+            if c.epochs.len() >= MAX_EPOCHS {
+                // Epoch 0 is the oldest: its lists join the stale ones, and it is dropped.
+                let mut renewed: Vec<bool> = c.epoch_of.iter().map(|&e| e == 0).collect();
+                for &v in &stale {
+                    renewed[v as usize] = true;
+                }
+                stale = (0..posed.len() as u32)
+                    .filter(|&v| renewed[v as usize])
+                    .collect();
             }
+            self.renew(c, &stale, posed, &keys);
         }
         let lists = cache.as_ref().expect("partner lists were just built");
         let cutoff2 = self.cutoff * self.cutoff;
@@ -258,6 +260,7 @@ impl ContactSearch {
             staleness: (checked - started).as_secs_f64(),
             rebuilding: (rebuilt - checked).as_secs_f64(),
             scanning: rebuilt.elapsed().as_secs_f64(),
+            rebuilt: stale.len(),
         };
         (weights, times)
     }
@@ -281,19 +284,14 @@ impl ContactSearch {
                     .collect()
             })
             .collect();
-        let m = PARTNER_MARGIN;
         (0..posed.len() as u32)
             .into_par_iter()
             .filter(|&v| {
                 let v = v as usize;
                 let e = c.epoch_of[v] as usize;
                 let dv = (posed[v] - c.epochs[e][v]).norm();
-                let searched = &self.searched[self.labels[v]];
-                (0..nb).any(|b| {
-                    let s = dv + moved[e][b];
-                    let near = b >= 64 || c.near[v] & part_bit(b) != 0;
-                    searched[b] && if near { s > m } else { s >= 2.0 * m }
-                })
+                let allowed = &c.allowance[v * nb..(v + 1) * nb];
+                (0..nb).any(|b| dv + moved[e][b] > allowed[b] as f64)
             })
             .collect()
     }
@@ -303,7 +301,8 @@ impl ContactSearch {
     /// `keys`: `posed` as the trees store it.
     fn renew(&self, c: &mut PartnerLists, ids: &[u32], posed: &[Vector3<f64>], keys: &[[f32; 3]]) {
         let parts = self.posed_parts(posed);
-        let built: Vec<(u64, Vec<u32>)> = ids
+        let nb = self.parts.len();
+        let built: Vec<(Vec<f32>, Vec<u32>)> = ids
             .par_iter()
             .map(|&v| {
                 let v = v as usize;
@@ -314,10 +313,10 @@ impl ContactSearch {
             .collect();
         let epoch = c.epochs.len() as u8;
         c.epochs.push(posed.to_vec());
-        for (&v, (near, list)) in ids.iter().zip(built) {
+        for (&v, (allowance, list)) in ids.iter().zip(built) {
             let v = v as usize;
             c.epoch_of[v] = epoch;
-            c.near[v] = near;
+            c.allowance[v * nb..(v + 1) * nb].copy_from_slice(&allowance);
             c.lists[v] = list;
         }
         // Drop the epochs no list refers to and renumber the rest.
@@ -356,8 +355,8 @@ impl ContactSearch {
         PosedParts { trees, boxes }
     }
 
-    /// Vertex v's near parts (bits) and list at `posed`: the allowed vertices within
-    /// min(nearest + 2 m, cut-off + m). `bound`: a distance the nearest allowed vertex is
+    /// Vertex v's allowances (one per part, see [`PartnerLists::allowance`]) and list at
+    /// `posed`: the allowed vertices within min(nearest + 2 m, cut-off + m). `bound`: a distance the nearest allowed vertex is
     /// known to lie within, metres (infinity when none is known).
     fn partner_list(
         &self,
@@ -365,7 +364,7 @@ impl ContactSearch {
         posed: &[Vector3<f64>],
         v: usize,
         bound: f64,
-    ) -> (u64, Vec<u32>) {
+    ) -> (Vec<f32>, Vec<u32>) {
         let m = PARTNER_MARGIN;
         let q = &posed[v];
         let rest_d2 = self.params.rest_distance.powi(2);
@@ -375,16 +374,20 @@ impl ContactSearch {
         // Only vertices within the nearest's distance + 2 m are listed: with an upper bound
         // on that distance, nothing farther needs visiting.
         let search = slack((bound + 2.0 * m).min(reach));
-        let mut near = 0u64;
+        let mut allowance = vec![f32::INFINITY; parts.trees.len()];
         let mut found: Vec<(u32, f64)> = Vec::new();
         for (b, tree) in parts.trees.iter().enumerate() {
             if !self.searched[self.labels[v]][b] {
                 continue;
             }
             let gap = box_gap(q, &parts.boxes[b]);
-            if gap <= reach + m {
-                near |= part_bit(b);
-            }
+            // Rounded down to f32, and a little less: the stored allowance never exceeds
+            // the true one.
+            allowance[b] = if gap <= reach {
+                m as f32
+            } else {
+                ((gap - self.cutoff) * (1.0 - 1e-5)) as f32
+            };
             if gap > search {
                 continue;
             }
@@ -410,7 +413,7 @@ impl ContactSearch {
             .collect();
         // In memory order, for the scans.
         list.sort_unstable();
-        (near, list)
+        (allowance, list)
     }
 }
 

@@ -63,9 +63,9 @@ impl RoundKind {
 pub struct Probe {
     /// Seconds spent per step, summed over every fit.
     timings: Mutex<Vec<(&'static str, f64)>>,
-    /// Nearest answers reused from an earlier round and answers given, model->observed then
-    /// observed->model, over every fit.
-    nearest_reuse: Mutex<[usize; 4]>,
+    /// Answers reused from an earlier round and answers given, over every fit: nearest
+    /// model->observed, nearest observed->model, then rho_c's partner lists.
+    reuse: Mutex<[usize; 6]>,
     /// Every round since the last [`Probe::take_rounds`], and how many fits (starts) began
     /// since then.
     rounds: Mutex<(Vec<RoundRecord>, usize)>,
@@ -111,21 +111,28 @@ impl Probe {
         self.timings.lock().map(|t| t.clone()).unwrap_or_default()
     }
 
-    /// The shares of nearest-neighbour answers reused from an earlier round
-    /// (`kept_nearest`), model->observed and observed->model, over every fit so far.
-    pub fn nearest_reused_share(&self) -> [f64; 2] {
-        let r = self.nearest_reuse.lock().map(|r| *r).unwrap_or_default();
-        [
-            r[0] as f64 / r[1].max(1) as f64,
-            r[2] as f64 / r[3].max(1) as f64,
-        ]
+    /// The shares of answers reused from an earlier round over every fit so far: nearest
+    /// neighbours model->observed and observed->model (`kept_nearest`), and rho_c's partner
+    /// lists (`contact`).
+    pub fn reused_shares(&self) -> [f64; 3] {
+        let r = self.reuse.lock().map(|r| *r).unwrap_or_default();
+        [0, 2, 4].map(|i| r[i] as f64 / r[i + 1].max(1) as f64)
     }
 
     /// Adds one round's nearest answers: reused and given model->observed, then
     /// observed->model.
     pub(super) fn add_nearest(&self, counts: [usize; 4]) {
-        if let Ok(mut r) = self.nearest_reuse.lock() {
-            for (total, n) in r.iter_mut().zip(counts) {
+        self.add_reuse(0, &counts);
+    }
+
+    /// Adds one round's rho_c partner lists: `kept` of `used`.
+    pub(super) fn add_contact_lists(&self, kept: usize, used: usize) {
+        self.add_reuse(4, &[kept, used]);
+    }
+
+    fn add_reuse(&self, from: usize, counts: &[usize]) {
+        if let Ok(mut r) = self.reuse.lock() {
+            for (total, n) in r[from..].iter_mut().zip(counts) {
                 *total += n;
             }
         }

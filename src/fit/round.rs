@@ -89,6 +89,7 @@ impl Fitter<'_> {
                 probe.add_time(RHO_C_STALENESS, parts.staleness);
                 probe.add_time(RHO_C_REBUILDING, parts.rebuilding);
                 probe.add_time(RHO_C_SCANNING, parts.scanning);
+                probe.add_contact_lists(weights.len() - parts.rebuilt, weights.len());
                 weights
             } else {
                 vec![1.0; posed.len()]

@@ -47,6 +47,12 @@ impl<'a> Tracker<'a> {
 
     /// Fits `frame` from its `neighbours` (none: the reference frame t0, not fitted); a
     /// neighbour not known starts from the reference pose.
+    ///
+    /// The restart test ([`Fitter::lost`]) measures the fit's energy against the larger of
+    /// the two neighbours' energies: a neighbour the model fits almost exactly (a pose near
+    /// the reference pose, where the model was built) is a poor yardstick. On the
+    /// humanoid, t8 and t16 (near the reference pose, eq. 4 a tenth of their neighbours')
+    /// made the well-fitted t9 and t17 restart, for 60 rounds.
     pub fn fit(
         &mut self,
         frame: u32,
@@ -58,13 +64,17 @@ impl<'a> Tracker<'a> {
             None => self.fitter.reference(obs.vertices.len()),
             Some(n) => {
                 let rest = Pose::rest(self.fitter.model.skeleton.bones.len());
-                let (start, previous_fit) = match self.done.get(&n.previous) {
-                    Some((pose, fit)) => (pose, Some(fit)),
+                let (start, mut previous_fit) = match self.done.get(&n.previous) {
+                    Some((pose, fit)) => (pose, Some(fit.clone())),
                     None => (&rest, None),
                 };
-                let before = n.before.and_then(|f| self.done.get(&f)).map(|x| &x.0);
+                let before = n.before.and_then(|f| self.done.get(&f));
+                if let (Some(fit), Some((_, before))) = (previous_fit.as_mut(), before) {
+                    fit.energy = fit.energy.max(before.energy);
+                }
+                let before = before.map(|x| &x.0);
                 self.fitter
-                    .fit_tracked(obs, start, before, previous_fit, probe)
+                    .fit_tracked(obs, start, before, previous_fit.as_ref(), probe)
             }
         };
         self.done

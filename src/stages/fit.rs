@@ -171,7 +171,7 @@ pub fn track_in_memory(
         results: out,
         seconds,
         steps: probe.timings(),
-        nearest_reused: probe.nearest_reused_share(),
+        reused: probe.reused_shares(),
         rounds,
     })
 }
@@ -184,9 +184,8 @@ pub struct Tracked {
     pub seconds: Vec<(u32, f64)>,
     /// Seconds spent in each step of the rounds, summed over all frames.
     pub steps: Vec<(&'static str, f64)>,
-    /// The shares of nearest-neighbour answers reused from an earlier round, model->observed
-    /// and observed->model.
-    pub nearest_reused: [f64; 2],
+    /// The shares of answers reused from an earlier round ([`crate::fit::Probe::reused_shares`]).
+    pub reused: [f64; 3],
     /// Every round of every frame's fits, in computation order.
     pub rounds: Vec<(u32, crate::fit::RoundRecord)>,
 }
