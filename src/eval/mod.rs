@@ -3,9 +3,14 @@
 //!
 //! - accuracy: the distance within which 90% of the reconstructed vertices lie from the true
 //!   surface (metres; the true surface is sampled every 2 mm);
-//! - completeness: the share of points sampled on the true surface that lie inside the
-//!   reconstructed solid or within one voxel of it (from the stage's cached signed distance),
-//!   so a reconstruction that never cuts into the object scores 1.
+//! - signed offset: each reconstructed vertex's distance to the true surface, positive
+//!   outside; its median and the share of vertices outside show a surface that is too fat
+//!   or too thin, which accuracy alone does not;
+//! - completeness: the share of points sampled on the true surface that lie within one voxel
+//!   of the reconstructed surface (both surfaces sampled every 2 mm);
+//! - inside completeness (the older figure): the share of true-surface samples inside the
+//!   reconstructed solid or within one voxel of it (from the stage's cached signed
+//!   distance), which a reconstruction too fat by any amount passes.
 
 use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
@@ -21,10 +26,18 @@ pub mod reliability;
 
 /// Points on `mesh`'s surface about `spacing` metres apart (deterministic).
 pub fn sample_surface(mesh: &TriMesh, spacing: f64) -> Vec<Vector3<f64>> {
-    let mut out = Vec::new();
+    sample_oriented(mesh, spacing).0
+}
+
+/// [`sample_surface`] with each point's triangle's unit normal (the triangles' winding
+/// decides which side it points to; zero for a degenerate triangle).
+pub fn sample_oriented(mesh: &TriMesh, spacing: f64) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+    let (mut out, mut normals) = (Vec::new(), Vec::new());
     for t in &mesh.triangles {
         let [a, b, c] = t.map(|i| mesh.vertices[i as usize]);
-        let area = 0.5 * (b - a).cross(&(c - a)).norm();
+        let cross = (b - a).cross(&(c - a));
+        let area = 0.5 * cross.norm();
+        let normal = cross.try_normalize(1e-300).unwrap_or_else(Vector3::zeros);
         // n x n barycentric grid with ~area / spacing^2 points.
         let n = ((2.0 * area).sqrt() / spacing).ceil().max(1.0) as usize;
         for i in 0..n {
@@ -34,10 +47,11 @@ pub fn sample_surface(mesh: &TriMesh, spacing: f64) -> Vec<Vector3<f64>> {
                     (j as f64 + 1.0 / 3.0) / n as f64,
                 );
                 out.push(a + u * (b - a) + v * (c - a));
+                normals.push(normal);
             }
         }
     }
-    out
+    (out, normals)
 }
 
 /// One row of the reconstruction table.
@@ -46,46 +60,103 @@ pub struct ReconRow {
     pub frame: u32,
     pub stage: &'static str,
     pub vertices: usize,
-    /// Metres.
-    pub accuracy90: f64,
-    /// Share in [0, 1].
-    pub completeness: f64,
+    pub score: ReconScore,
     /// The stage's voxel size, metres.
     pub voxel: f64,
 }
 
-/// Accuracy and completeness of one reconstruction.
-pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TriMesh) -> (f64, f64) {
-    score_against(recon, grid, sdf, &truth_index(truth))
+/// How one reconstruction compares with the true surface (see the module's notes).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReconScore {
+    /// Metres.
+    pub accuracy90: f64,
+    /// Median signed distance of the reconstructed vertices to the true surface, metres,
+    /// positive outside.
+    pub median_offset: f64,
+    /// Share of the reconstructed vertices outside the true surface, in [0, 1].
+    pub outside_share: f64,
+    /// Share of true-surface samples within one voxel of the reconstructed surface.
+    pub completeness: f64,
+    /// Share of true-surface samples inside the reconstruction or within one voxel of it.
+    pub inside_completeness: f64,
 }
 
-/// The true surface sampled every 2 mm, indexed for nearest-point queries.
-pub fn truth_index(truth: &TriMesh) -> PointIndex {
-    PointIndex::new(sample_surface(truth, 0.002), 0.01)
+/// Spacing of the surface samples both surfaces are measured with, metres.
+const SAMPLE_SPACING: f64 = 0.002;
+
+/// The true surface sampled every 2 mm with its outward normals, indexed for
+/// nearest-point queries.
+pub struct TruthSamples {
+    index: PointIndex,
+    normals: Vec<Vector3<f64>>,
 }
 
-/// [`score`] against an already sampled true surface.
-fn score_against(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], index: &PointIndex) -> (f64, f64) {
-    let mut d: Vec<f64> = recon
+impl TruthSamples {
+    pub fn new(truth: &TriMesh) -> TruthSamples {
+        let (points, normals) = sample_oriented(truth, SAMPLE_SPACING);
+        TruthSamples {
+            index: PointIndex::new(points, 0.01),
+            normals,
+        }
+    }
+
+    /// Distance from `v` to the true surface, metres, positive outside: along the nearest
+    /// sample's normal when `v` lies within two sample spacings of it (where the surface is
+    /// as good as its tangent plane), else the distance to that sample with the side the
+    /// normal gives. Infinite for an empty truth.
+    pub fn signed_distance(&self, v: &Vector3<f64>) -> f64 {
+        let Some((i, d)) = self.index.nearest(v) else {
+            return f64::INFINITY;
+        };
+        let along = (v - self.index.points()[i]).dot(&self.normals[i]);
+        if d <= 2.0 * SAMPLE_SPACING {
+            along
+        } else if along < 0.0 {
+            -d
+        } else {
+            d
+        }
+    }
+}
+
+/// The value below which a share `q` of the sorted `values` lie (infinite for none).
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::INFINITY;
+    }
+    sorted[((sorted.len() as f64 * q).ceil() as usize).clamp(1, sorted.len()) - 1]
+}
+
+/// Scores the reconstruction `recon` (with its stage's grid and signed distance) against
+/// the true surface.
+pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TruthSamples) -> ReconScore {
+    let mut signed: Vec<f64> = recon
         .vertices
         .par_iter()
-        .map(|v| index.nearest(v).map_or(f64::INFINITY, |x| x.1))
+        .map(|v| truth.signed_distance(v))
         .collect();
+    let mut d: Vec<f64> = signed.iter().map(|x| x.abs()).collect();
     d.sort_by(f64::total_cmp);
-    let accuracy90 = if d.is_empty() {
-        f64::INFINITY
-    } else {
-        d[((d.len() as f64 * 0.9).ceil() as usize).clamp(1, d.len()) - 1]
-    };
-    let covered = index
-        .points()
+    signed.sort_by(f64::total_cmp);
+    let outside = signed.iter().filter(|&&x| x > 0.0).count();
+    let points = truth.index.points();
+    let share = |n: usize| n as f64 / points.len().max(1) as f64;
+    let recon_index = PointIndex::new(sample_surface(recon, SAMPLE_SPACING), 0.01);
+    let near = points
+        .par_iter()
+        .filter(|p| recon_index.any_within(p, grid.voxel))
+        .count();
+    let inside = points
         .par_iter()
         .filter(|p| grid.interpolate(sdf, p, f32::INFINITY) as f64 <= grid.voxel)
         .count();
-    (
-        accuracy90,
-        covered as f64 / index.points().len().max(1) as f64,
-    )
+    ReconScore {
+        accuracy90: quantile(&d, 0.9),
+        median_offset: quantile(&signed, 0.5),
+        outside_share: outside as f64 / signed.len().max(1) as f64,
+        completeness: share(near),
+        inside_completeness: share(inside),
+    }
 }
 
 /// Reconstruction stages the evaluation knows: (stage, mesh file, grid file) per frame.
@@ -112,18 +183,17 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
             let path = dir.join(&grid_file);
             let data = crate::limits::read_cache_file(&path)?;
             let (grid, sdf) = crate::stages::visual_hull::parse_grid(&path, &data)?;
-            let (accuracy90, completeness) = score_against(
+            let score = score(
                 &mesh,
                 &grid,
                 &sdf,
-                index.get_or_insert_with(|| truth_index(&truth)),
+                index.get_or_insert_with(|| TruthSamples::new(&truth)),
             );
             rows.push(ReconRow {
                 frame,
                 stage,
                 vertices: mesh.vertices.len(),
-                accuracy90,
-                completeness,
+                score,
                 voxel: grid.voxel,
             });
         }
@@ -269,12 +339,23 @@ fn coverage_of(
 
 /// The CSV text of reconstruction rows.
 pub fn reconstruction_csv(rows: &[ReconRow]) -> String {
-    let mut s = String::from("frame,stage,vertices,accuracy90_m,completeness,voxel_m\n");
+    let mut s = String::from(
+        "frame,stage,vertices,accuracy90_m,completeness,voxel_m,median_offset_m,outside_share,inside_completeness\n",
+    );
     for r in rows {
+        let c = &r.score;
         let _ = writeln!(
             s,
-            "{},{},{},{:.6},{:.6},{}",
-            r.frame, r.stage, r.vertices, r.accuracy90, r.completeness, r.voxel
+            "{},{},{},{:.6},{:.6},{},{:.6},{:.6},{:.6}",
+            r.frame,
+            r.stage,
+            r.vertices,
+            c.accuracy90,
+            c.completeness,
+            r.voxel,
+            c.median_offset,
+            c.outside_share,
+            c.inside_completeness
         );
     }
     s
@@ -283,19 +364,77 @@ pub fn reconstruction_csv(rows: &[ReconRow]) -> String {
 /// A printed table of reconstruction rows.
 pub fn reconstruction_table(rows: &[ReconRow]) -> String {
     let mut s = format!(
-        "{:>6}  {:>12}  {:>9}  {:>13}  {:>12}\n",
-        "frame", "stage", "vertices", "accuracy90 cm", "completeness"
+        "{:>6}  {:>12}  {:>9}  {:>13}  {:>10}  {:>8}  {:>12}  {:>7}\n",
+        "frame",
+        "stage",
+        "vertices",
+        "accuracy90 cm",
+        "offset mm",
+        "outside",
+        "completeness",
+        "inside"
     );
     for r in rows {
+        let c = &r.score;
         let _ = writeln!(
             s,
-            "{:>6}  {:>12}  {:>9}  {:>13.2}  {:>11.2}%",
+            "{:>6}  {:>12}  {:>9}  {:>13.2}  {:>+10.1}  {:>7.1}%  {:>11.2}%  {:>6.1}%",
             r.frame,
             r.stage,
             r.vertices,
-            r.accuracy90 * 100.0,
-            r.completeness * 100.0
+            c.accuracy90 * 100.0,
+            c.median_offset * 1e3,
+            c.outside_share * 100.0,
+            c.completeness * 100.0,
+            c.inside_completeness * 100.0
         );
     }
+    s.push_str(
+        "offset: median signed distance of the vertices to the truth (+ outside); outside: share \
+         of vertices outside; completeness: true surface within a voxel of the reconstruction; \
+         inside: true surface inside it or within a voxel\n",
+    );
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::isosurface::{extract, ScalarGrid};
+
+    /// A sphere of `radius` about the origin, meshed from its distance field (2 mm samples).
+    fn sphere(radius: f64) -> TriMesh {
+        let r = Vector3::repeat(radius + 0.01);
+        extract(&ScalarGrid::sample(-r, r, 0.002, |p| p.norm() - radius))
+    }
+
+    /// A reconstruction 5 mm too fat is 5 mm outside with every vertex outside, and
+    /// complete within a 1 cm voxel; one 15 mm too fat is not complete, though the older
+    /// inside figure still scores it 100%; one 5 mm too thin is 5 mm inside. (A vertex in
+    /// ten thousand may land on the wrong side of a sample's tangent plane.)
+    #[test]
+    fn signed_offsets_show_a_fat_surface() {
+        let truth = TruthSamples::new(&sphere(0.1));
+        let grid = GridSpec::covering(Vector3::repeat(-0.15), Vector3::repeat(0.15), 0.01);
+        for (radius, offset, outside, complete) in [
+            (0.105, 0.005, 1.0, 1.0),
+            (0.115, 0.015, 1.0, 0.0),
+            (0.095, -0.005, 0.0, 1.0),
+        ] {
+            let recon = sphere(radius);
+            // The reconstruction's own signed distance, as a stage caches it.
+            let sdf: Vec<f32> = (0..grid.len())
+                .map(|i| {
+                    let [x, y, z] = grid.coords(i);
+                    (grid.centre(x, y, z).norm() - radius) as f32
+                })
+                .collect();
+            let s = score(&recon, &grid, &sdf, &truth);
+            assert!((s.median_offset - offset).abs() < 3e-4, "{radius}: {s:?}");
+            assert!((s.outside_share - outside).abs() < 1e-3, "{radius}: {s:?}");
+            assert!((s.completeness - complete).abs() < 1e-9, "{radius}: {s:?}");
+            assert!((s.accuracy90 - offset.abs()).abs() < 1e-3, "{radius}: {s:?}");
+            assert_eq!(s.inside_completeness, 1.0, "{radius}: {s:?}");
+        }
+    }
 }

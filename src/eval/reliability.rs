@@ -75,11 +75,11 @@ pub fn evaluate(job: &Job) -> Result<Vec<ReliabilityRow>> {
         let obs = crate::stages::load_observed(&ctx, frame)?;
         let grid = crate::stages::load_grid_spec(&ctx, "graphcut", frame)?;
         let h = grid.voxel;
-        let index = super::truth_index(&truth);
+        let truth = super::TruthSamples::new(&truth);
         let distance: Vec<f64> = obs
             .vertices
             .par_iter()
-            .map(|v| index.nearest(&v.cast()).map_or(f64::INFINITY, |x| x.1))
+            .map(|v| truth.signed_distance(&v.cast()).abs())
             .collect();
         let is_true = |i: usize| distance[i] <= h;
         let is_false = |i: usize| distance[i] > 2.0 * h;

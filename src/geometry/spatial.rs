@@ -73,6 +73,24 @@ impl PointIndex {
         }
         Some(best)
     }
+
+    /// Whether some indexed point lies within `radius` metres of `q`.
+    pub fn any_within(&self, q: &Vector3<f64>, radius: f64) -> bool {
+        let (lo, hi) = (
+            Self::key(&q.add_scalar(-radius), self.cell),
+            Self::key(&q.add_scalar(radius), self.cell),
+        );
+        (lo[2]..=hi[2]).any(|z| {
+            (lo[1]..=hi[1]).any(|y| {
+                (lo[0]..=hi[0]).any(|x| {
+                    self.cells.get(&[x, y, z]).is_some_and(|list| {
+                        list.iter()
+                            .any(|&i| (self.points[i as usize] - q).norm() <= radius)
+                    })
+                })
+            })
+        })
+    }
 }
 
 #[cfg(test)]
@@ -97,6 +115,9 @@ mod tests {
                 .map(|p| (p - q).norm())
                 .fold(f64::INFINITY, f64::min);
             assert_eq!(index.nearest(&q).unwrap().1, brute);
+            for radius in [0.01, 0.05, 0.2] {
+                assert_eq!(index.any_within(&q, radius), brute <= radius);
+            }
         }
     }
 }
