@@ -169,7 +169,10 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         &mut timings,
     );
     let t_refine = t.elapsed().as_secs_f64();
-    let (t_mesh, _) = best_of(1, || gc::mesh(&grid, &refined, p.smoothing_iterations));
+    let cones = crate::stages::visual_hull::cones(cams, &masks, &job.config.visual_hull);
+    let (t_mesh, _) = best_of(1, || {
+        gc::mesh(&grid, &refined, &sdf, &cones, p.smoothing_iterations)
+    });
     Ok(format!(
         "graph cut, frame {frame}: {} band voxels\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n",
         timings.band_voxels,

@@ -179,8 +179,8 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     let worst = |e: &[f64], frames: &[usize]| frames.iter().map(|&f| e[f]).fold(0.0, f64::max);
     let (phantom, contact) = ([6, 7, 8, 11], [9, 10]);
     let all: Vec<usize> = (0..19).collect();
-    // Within 1 cm on every frame (the paper's result; the README's table) and 0.37 cm on
-    // average (the target is 0.35: 0.356 now, 0.361 with the tolerance halved or doubled).
+    // Within 1 cm on every frame (the paper's result; the README's table) and 0.35 cm on
+    // average (0.165 now; 0.36 before the surfaces lay on the silhouette cones).
     for (name, e) in [
         ("default", &proposed),
         ("tolerance halved", &halved),
@@ -193,32 +193,34 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
             "proposed, {name}: worst {proposed_worst}"
         );
         let mean = e.iter().sum::<f64>() / e.len() as f64;
-        assert!(mean <= 0.37, "proposed, {name}: mean {mean:.3} cm: {e:.2?}");
+        assert!(mean <= 0.35, "proposed, {name}: mean {mean:.3} cm: {e:.2?}");
     }
-    assert!(
-        worst(&icp, &phantom) > 3.0,
-        "icp on phantom frames {icp:.2?}"
-    );
-    assert!(
-        worst(&icp, &contact) > 3.0,
-        "icp on contact frames {icp:.2?}"
-    );
+    // A baseline slips on frames when its worst error there is over 1.5 cm and 4 times
+    // `proposed`'s. (With the surfaces and the model on the silhouette cones rather than a
+    // voxel outside them, the baselines slip 1.8-6.5 cm there, `proposed` stays within
+    // 0.4 cm; before, with everything a voxel too fat, they slipped over 3 cm.)
+    let slips = |e: &[f64], frames: &[usize]| {
+        let w = worst(e, frames);
+        w > 1.5 && w > 4.0 * worst(&proposed, frames)
+    };
+    assert!(slips(&icp, &phantom), "icp on phantom frames {icp:.2?}");
+    assert!(slips(&icp, &contact), "icp on contact frames {icp:.2?}");
     // Ogawara's normal test pairs a vertex with the nearest one whose normal agrees, which
     // may lie on the phantom or on the far side of the touching part (Fig. 12).
     assert!(
-        worst(&normals, &phantom) > 3.0,
+        slips(&normals, &phantom),
         "normals on phantom frames {normals:.2?}"
     );
     assert!(
-        worst(&normals, &contact) > 3.0,
+        slips(&normals, &contact),
         "normals on contact frames {normals:.2?}"
     );
     assert!(
-        worst(&rho_c, &[6, 7, 8]) > 3.0,
+        slips(&rho_c, &[6, 7, 8]),
         "rho_c on phantom frames {rho_c:.2?}"
     );
     assert!(
-        worst(&rho_p, &contact) > 3.0,
+        slips(&rho_p, &contact),
         "rho_p on contact frames {rho_p:.2?}"
     );
 }

@@ -433,7 +433,10 @@ mod tests {
             assert!((s.median_offset - offset).abs() < 3e-4, "{radius}: {s:?}");
             assert!((s.outside_share - outside).abs() < 1e-3, "{radius}: {s:?}");
             assert!((s.completeness - complete).abs() < 1e-9, "{radius}: {s:?}");
-            assert!((s.accuracy90 - offset.abs()).abs() < 1e-3, "{radius}: {s:?}");
+            assert!(
+                (s.accuracy90 - offset.abs()).abs() < 1e-3,
+                "{radius}: {s:?}"
+            );
             assert_eq!(s.inside_completeness, 1.0, "{radius}: {s:?}");
         }
     }

@@ -110,8 +110,11 @@ impl Fitter<'_> {
         };
         let (_, cap) = p.stopping(p.method);
         let mut best = self.fit_prepared(&prepared, &first, cap, probe);
-        if !p.restart.enabled || !self.lost(&best, &first, previous, previous_fit) {
+        if !p.restart.enabled {
             return best;
+        }
+        if !self.lost(&best, &first, previous, previous_fit) {
+            return self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
         }
         let mut rest = Pose::rest(previous.rotations.len());
         rest.translation = previous.translation;
@@ -127,7 +130,36 @@ impl Fitter<'_> {
             let r = self.fit_prepared(&prepared, start, cap * p.restart.rounds_factor, probe);
             best = better(best, r);
         }
-        best
+        self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe)
+    }
+
+    /// A per-limb restart: when the best fit bent one joint by more than
+    /// `restart.turn_deg` from both `previous` and the constant-velocity prediction
+    /// `predicted` (a hand folded back into the chest that rho_c hides), that joint is put
+    /// back as it was in `previous`, its children following, and fitted again from there;
+    /// the lower score wins. On the humanoid the right hand folded
+    /// back at t11-t14 as the forearms crossed the chest (2.41 cm); unfolded, 0.25 cm.
+    fn unfolded(
+        &self,
+        prepared: &super::pairs::Prepared,
+        best: FitResult,
+        previous: &Pose,
+        predicted: Option<&Pose>,
+        cap: usize,
+        probe: &Probe,
+    ) -> FitResult {
+        let skeleton = &self.model.skeleton;
+        let Some((bone, turn)) = sharpest_joint_turn(skeleton, &best.pose, previous, predicted)
+        else {
+            return best;
+        };
+        if turn <= self.params.restart.turn_deg {
+            return best;
+        }
+        let mut start = best.pose.clone();
+        start.rotations[bone] = previous.rotations[bone];
+        let r = self.fit_prepared(prepared, &start, cap, probe);
+        better(best, r)
     }
 
     /// Whether a tracked frame's fit from `start` looks lost, so that other starts are
@@ -226,6 +258,30 @@ fn better(a: FitResult, b: FitResult) -> FitResult {
     best.diagnostics.iterations = rounds;
     best.diagnostics.lm_steps = steps;
     best
+}
+
+/// The bone whose direction in its parent's frame (its joint's bend; the twist about the
+/// bone, which the surface hardly shows, left out) differs most between `pose` and the
+/// nearer of `previous` and `predicted`, and by how much, degrees.
+fn sharpest_joint_turn(
+    skeleton: &Skeleton,
+    pose: &Pose,
+    previous: &Pose,
+    predicted: Option<&Pose>,
+) -> Option<(usize, f64)> {
+    let bend = |b: usize, other: &Pose| {
+        let d = skeleton.bones[b].tail - skeleton.bones[b].head;
+        (pose.rotations[b] * d).angle(&(other.rotations[b] * d))
+    };
+    (0..skeleton.bones.len())
+        .map(|b| {
+            let from_previous = bend(b, previous);
+            predicted
+                .map_or(from_previous, |q| from_previous.min(bend(b, q)))
+                .to_degrees()
+        })
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
 }
 
 /// The largest angle, degrees, by which a bone's head-to-tail direction in `pose` differs

@@ -76,6 +76,9 @@ pub fn squared_distance_to(grid: &GridSpec, site: &[bool]) -> Vec<f64> {
         }
     });
     let plane = nx * ny;
+    if nz == 1 {
+        return d; // an image: nothing along z
+    }
     let columns: Vec<Vec<f64>> = (0..plane)
         .into_par_iter()
         .map(|i| {

@@ -2,6 +2,7 @@
 //! iso-surface extraction, rasterization, smoothing and nearest-point queries.
 
 pub mod cell_grid;
+pub mod cone_distance;
 pub mod distance;
 pub mod grid;
 pub mod isosurface;

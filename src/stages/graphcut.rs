@@ -43,6 +43,7 @@
 //!   phantom volume stays, for stage 4 to flag).
 
 use crate::camera::Camera;
+use crate::geometry::cone_distance::ConeDistance;
 use crate::geometry::grid::{GridSpec, FACE_OFFSETS};
 use crate::geometry::TriMesh;
 use crate::maxflow::GridGraph;
@@ -68,7 +69,11 @@ pub struct GraphcutParams {
     pub best_pairs: usize,
     /// Sharpness sigma of the cost mapping. Default 0.5.
     pub sigma: f64,
-    /// Ballooning weight lambda, per metre (times h^3 per voxel). Default 200.
+    /// Ballooning weight lambda, per metre (times h^3 per voxel). Default 200. A voxel is
+    /// kept outside the photo-consistent surface when the cost of the faces it adds differs
+    /// from that of the faces it hides by less than lambda h / (4 pi / 3) (0.48 at 1 cm
+    /// voxels), so the cut leans outward by up to a voxel where it carves; lower values
+    /// shrink surfaces nothing sees (see BENCHMARKS.md's tried table).
     pub ballooning: f64,
     /// Evidence-weighted ballooning: the photo-consistency C from which a surface seen behind
     /// a band voxel (deeper along the hull's inward normal, within the band, and at least as
@@ -696,13 +701,30 @@ pub fn grey(images: &[image::RgbImage]) -> Vec<GreyImage> {
     images.par_iter().map(GreyImage::from_rgb).collect()
 }
 
-/// Meshes a refined occupancy as the hull stage does.
-pub fn mesh(grid: &GridSpec, occupied: &[bool], smoothing: usize) -> (Vec<f32>, TriMesh) {
-    let mut sdf = crate::stages::visual_hull::box_blur_3d(
+/// Meshes a refined occupancy as the hull stage does, intersected with the hull's solid on
+/// the silhouette cones (`hull_sdf` moved onto `cones` as the hull's mesh is,
+/// [`crate::stages::visual_hull::on_the_cones`]): where the cut kept the hull, its surface
+/// is the hull's, below the voxel size; where it carved, it lies between the kept and
+/// carved voxels; it never lies outside the hull.
+pub fn mesh(
+    grid: &GridSpec,
+    occupied: &[bool],
+    hull_sdf: &[f32],
+    cones: &ConeDistance,
+    smoothing: usize,
+) -> (Vec<f32>, TriMesh) {
+    use crate::stages::visual_hull::{box_blur_3d, on_the_cones};
+    let mut sdf = box_blur_3d(
         grid,
         &crate::geometry::distance::signed_distance(grid, occupied),
     );
-    let mut m = crate::stages::visual_hull::mesh_sdf(grid, &sdf);
+    let hull = on_the_cones(grid, hull_sdf, cones);
+    let field: Vec<f32> = sdf
+        .iter()
+        .zip(hull)
+        .map(|(&cut, hull)| cut.max(hull))
+        .collect();
+    let mut m = crate::stages::visual_hull::mesh_sdf(grid, &field);
     crate::geometry::smooth::taubin(&mut m, smoothing);
     crate::stages::visual_hull::with_occupancy_sign(&mut sdf, occupied);
     (sdf, m)

@@ -131,7 +131,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
-        format_version: 3,
+        format_version: 4,
         params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
         sources: visual_hull_sources,
         compute: Compute::Frame(visual_hull_compute),
@@ -142,7 +142,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["visual_hull"],
-        format_version: 11,
+        format_version: 13,
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: Compute::Frame(graphcut_compute),
@@ -502,7 +502,8 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         &mut report,
     );
     spinner.finish_and_clear();
-    let (refined_sdf, mesh) = graphcut::mesh(&grid, &refined, p.smoothing_iterations);
+    let cones = visual_hull::cones(cams, &masks, &ctx.config.visual_hull);
+    let (refined_sdf, mesh) = graphcut::mesh(&grid, &refined, &sdf, &cones, p.smoothing_iterations);
     write_reconstruction(
         &dir,
         frame,

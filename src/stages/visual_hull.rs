@@ -10,12 +10,16 @@
 //! the rest is split (octree-style), so the work grows with the surface, not the volume.
 //! Footprint counts come from per-mask summed-area tables.
 //!
-//! The occupancy's signed distance (exact Euclidean distance transform) is meshed with
-//! marching tetrahedra ([`crate::geometry::isosurface`]) and optionally Taubin-smoothed. The
-//! grid and signed distance are kept for the graph-cut stage.
+//! The occupancy's signed distance (exact Euclidean distance transform) places the surface
+//! to within a voxel; near it, the distance to the silhouette cones
+//! ([`crate::geometry::cone_distance`]) moves it onto the cones themselves, below the voxel
+//! size ([`on_the_cones`]). That field is meshed with marching tetrahedra
+//! ([`crate::geometry::isosurface`]) and optionally Taubin-smoothed. The grid and the
+//! occupancy's signed distance are kept for the graph-cut stage.
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
+use crate::geometry::cone_distance::ConeDistance;
 use crate::geometry::distance::signed_distance;
 use crate::geometry::grid::GridSpec;
 use crate::geometry::isosurface::{self, ScalarGrid};
@@ -551,7 +555,8 @@ pub fn reconstruct(
     }
     fill_cavities(&grid, &mut occupied);
     let mut sdf = box_blur_3d(&grid, &signed_distance(&grid, &occupied));
-    let mut mesh = mesh_sdf(&grid, &sdf);
+    let cones = cones(cams, masks, p);
+    let mut mesh = mesh_sdf(&grid, &on_the_cones(&grid, &sdf, &cones));
     taubin(&mut mesh, p.smoothing_iterations);
     with_occupancy_sign(&mut sdf, &occupied);
     Ok(Some(Hull {
@@ -560,6 +565,42 @@ pub fn reconstruct(
         sdf,
         mesh,
     }))
+}
+
+/// How far the cones may move the occupancy's surface, voxels: the carving keeps a voxel
+/// whose footprint (the image of its bounding ball, radius 0.87 voxel) touches a
+/// silhouette, so its surface lies up to about a voxel outside the cones.
+const CONE_REACH: f64 = 1.5;
+
+/// The occupancy's signed distance `sdf` (metres) with the cones' distance where that lies
+/// within [`CONE_REACH`] voxels of it: min(max(cones, sdf - r), sdf + r). Its zero level
+/// is the cones' surface where the two agree within r, and never strays farther than r
+/// from the occupancy's, so that a one-pixel slit in one silhouette cannot cut the surface
+/// deeper than the carving did.
+pub fn on_the_cones(grid: &GridSpec, sdf: &[f32], cones: &ConeDistance) -> Vec<f32> {
+    let r = CONE_REACH * grid.voxel;
+    sdf.par_iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            let v = v as f64;
+            // Beyond r from the occupancy's surface the result keeps the sign of `sdf`.
+            if v.abs() >= r {
+                return v as f32;
+            }
+            let [x, y, z] = grid.coords(i);
+            let cone = cones.at(&grid.centre(x, y, z)).unwrap_or(v);
+            cone.max(v - r).min(v + r) as f32
+        })
+        .collect()
+}
+
+/// The distance to the silhouette cones with the carving's rules (`all_but`, `min_views`).
+pub fn cones<'a>(
+    cams: &'a [Camera],
+    masks: &[GrayImage],
+    p: &VisualHullParams,
+) -> ConeDistance<'a> {
+    ConeDistance::new(cams, masks, p.all_but, p.min_views)
 }
 
 /// Gives the stored signed distance the sign of the occupancy it was computed from (-1 um

@@ -273,20 +273,40 @@ pub fn run_folder(made: &Made, seq: &str, extra: &str) -> tempfile::TempDir {
 
 /// Rows (frame, stage, accuracy90, completeness) of `output/evaluation/reconstruction.csv`
 /// in a run folder.
-pub fn reconstruction_rows(dir: &Path) -> Vec<(u32, String, f64, f64)> {
+pub fn reconstruction_rows(dir: &Path) -> Vec<ReconRow> {
     let csv = std::fs::read_to_string(dir.join("output/evaluation/reconstruction.csv")).unwrap();
-    csv.lines()
-        .skip(1)
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    lines
         .map(|l| {
             let f: Vec<&str> = l.split(',').collect();
-            (
-                f[0].parse().unwrap(),
-                f[1].to_string(),
-                f[3].parse().unwrap(),
-                f[4].parse().unwrap(),
-            )
+            let get = |name: &str| f[header.iter().position(|h| *h == name).unwrap()];
+            let num = |name: &str| get(name).parse::<f64>().unwrap();
+            ReconRow {
+                frame: get("frame").parse().unwrap(),
+                stage: get("stage").to_string(),
+                accuracy: num("accuracy90_m"),
+                completeness: num("completeness"),
+                inside: num("inside_completeness"),
+                offset: num("median_offset_m"),
+            }
         })
         .collect()
+}
+
+/// One row of `pipeline evaluate`'s reconstruction.csv (metres and shares).
+#[derive(Debug, Clone)]
+pub struct ReconRow {
+    pub frame: u32,
+    pub stage: String,
+    /// accuracy90.
+    pub accuracy: f64,
+    /// Within a voxel of the reconstructed surface.
+    pub completeness: f64,
+    /// Inside the reconstruction or within a voxel of it.
+    pub inside: f64,
+    /// Median signed offset, positive outside.
+    pub offset: f64,
 }
 
 /// Path of the built `pipeline` binary.
