@@ -150,8 +150,10 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         .map(|c| job.sequence.load_frame(c, frame))
         .collect::<Result<_>>()?;
     let t_load = t.elapsed().as_secs_f64();
-    let (t_depth, depth) = best_of(1, || gc::depth_maps(cams, &hull, grid.voxel));
-    let (t_grey, images) = best_of(1, || gc::grey(&frames));
+    let (t_depth, depth) = best_of(1, || {
+        crate::photo::splatted_depth_maps(cams, &hull, grid.voxel)
+    });
+    let (t_grey, images) = best_of(1, || crate::photo::grey(&frames));
     let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let mut timings = gc::Timings::default();
@@ -214,12 +216,12 @@ pub fn reliability(
         .collect::<Result<_>>()?;
     let t_load = start.elapsed().as_secs_f64();
     let (t_blur, images) = best_of(1, || {
-        crate::stages::graphcut::grey(&frames)
+        crate::photo::grey(&frames)
             .par_iter()
             .map(|g| g.blurred(p.image_sigma))
             .collect::<Vec<_>>()
     });
-    let (t_depth, depth) = best_of(1, || reliability::depth_maps(cams, &mesh));
+    let (t_depth, depth) = best_of(1, || crate::photo::depth_maps(cams, &mesh));
     let normals = mesh.vertex_normals();
     let (t_zncc, (_, seen)) = best_of(3, || {
         reliability::vertex_zncc(cams, &images, &depth, &mesh, &normals, h, p)
@@ -263,7 +265,7 @@ pub fn reliability(
                 .zip(&images)
                 .filter(|(cam, _)| n.dot(&(cam.centre() - v)) > 0.5 * (cam.centre() - v).norm())
                 .filter_map(|(cam, img)| {
-                    reliability::sample_patch(cam, img, v, n, window, p.patch_spacing * h)
+                    crate::photo::sample_patch(cam, img, v, n, window, p.patch_spacing * h)
                 })
                 .collect();
             for a in 0..patches.len() {
@@ -279,7 +281,7 @@ pub fn reliability(
         let got = data.len() / (2 * len);
         let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
         crate::fsutil::write_atomic(path, &bytes)?;
-        let (t_pairs, mean) = best_of(5, || reliability::zncc_of_pairs(&data, len));
+        let (t_pairs, mean) = best_of(5, || crate::photo::zncc_of_pairs(&data, len));
         let _ = writeln!(
             out,
             "dumped {got} patch pairs ({window}x{window}) to {}\n\

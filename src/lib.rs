@@ -21,6 +21,7 @@ pub mod joints;
 pub mod limits;
 pub mod maxflow;
 pub mod overlay;
+pub mod photo;
 pub mod plot;
 pub mod poses;
 pub mod runner;

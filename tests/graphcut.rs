@@ -7,7 +7,6 @@ use common::*;
 use hullpose::geometry::grid::GridSpec;
 use hullpose::geometry::spatial::PointIndex;
 use hullpose::geometry::TriMesh;
-use hullpose::stages::graphcut;
 use std::path::Path;
 
 /// The rows of `pipeline evaluate`.
@@ -50,7 +49,7 @@ fn concavity_errors(made: &Made, seq: &str, dir: &Path, frame: u32) -> (f64, f64
     let truth = sequence.ground_truth_mesh(frame).unwrap().unwrap();
     let normals = truth.vertex_normals();
     let truth_index = PointIndex::new(truth.vertices.clone(), 0.02);
-    let depth = graphcut::depth_maps(&sequence.cameras, &truth, 0.01);
+    let depth = hullpose::photo::splatted_depth_maps(&sequence.cameras, &truth, 0.01);
     let samples = hullpose::eval::sample_surface(&truth, 0.005);
     let hull = PointIndex::new(mesh(dir, "visual_hull", frame).vertices, 0.02);
     let refined = PointIndex::new(mesh(dir, "graphcut", frame).vertices, 0.02);

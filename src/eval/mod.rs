@@ -260,7 +260,7 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
         let frames: Vec<image::RgbImage> = (0..job.sequence.cameras.len())
             .map(|c| job.sequence.load_frame(c, f))
             .collect::<Result<_>>()?;
-        let images = graphcut::grey(&frames);
+        let images = crate::photo::grey(&frames);
         for &stage in RECON_STAGES {
             if job.cache.manifest(stage, f).is_none() {
                 continue;

@@ -14,7 +14,7 @@ use crate::error::Result;
 use crate::geometry::obj::write_obj;
 use crate::geometry::ply::{read_ply, write_ply, PlyFormat, VertexAttributes};
 use crate::geometry::TriMesh;
-use crate::stages::{hull_files, reliability, Context};
+use crate::stages::{hull_files, Context};
 use image::RgbImage;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -30,7 +30,7 @@ pub fn image_colours(
     normals: &[Vector3<f64>],
     tolerance: f64,
 ) -> (Vec<[u8; 3]>, Vec<f32>) {
-    let depth = reliability::depth_maps(cams, mesh);
+    let depth = crate::photo::depth_maps(cams, mesh);
     let centres: Vec<Vector3<f64>> = cams.iter().map(Camera::centre).collect();
     mesh.vertices
         .par_iter()
@@ -48,7 +48,7 @@ pub fn image_colours(
                     continue;
                 }
                 let (w, h) = (cam.width as usize, cam.height as usize);
-                let front = reliability::farthest_around(&depth[c], w, h, px.x, px.y);
+                let front = crate::photo::farthest_around(&depth[c], w, h, px.x, px.y);
                 if z as f32 > front + tolerance as f32 {
                     continue;
                 }

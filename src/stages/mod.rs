@@ -398,12 +398,12 @@ pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Ve
 }
 
 /// Loads the frame's images as grey.
-fn grey_frames(ctx: &Context, frame: u32) -> Result<Vec<graphcut::GreyImage>> {
+fn grey_frames(ctx: &Context, frame: u32) -> Result<Vec<crate::photo::GreyImage>> {
     let frames: Vec<image::RgbImage> = (0..ctx.sequence.cameras.len())
         .into_par_iter()
         .map(|c| ctx.sequence.load_frame(c, frame))
         .collect::<Result<_>>()?;
-    Ok(graphcut::grey(&frames))
+    Ok(crate::photo::grey(&frames))
 }
 
 /// Paths of the reliability stage's artifacts of a frame (coloured PLY, compact
@@ -479,7 +479,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
     }
     let hull = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
     let cams = &ctx.sequence.cameras;
-    let depth = graphcut::depth_maps(cams, &hull, grid.voxel);
+    let depth = crate::photo::splatted_depth_maps(cams, &hull, grid.voxel);
     let images = grey_frames(ctx, frame)?;
     // Long cuts report their progress (drawn only when stderr is a terminal).
     let spinner = indicatif::ProgressBar::new_spinner();

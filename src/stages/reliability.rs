@@ -21,8 +21,8 @@
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
-use crate::stages::graphcut::GreyImage;
-use nalgebra::{Vector2, Vector3};
+use crate::photo::{depth_maps, dot, farthest_around, normalize, patch_grid, GreyImage};
+use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -282,127 +282,6 @@ pub fn vertex_zncc(
             },
         )
         .unzip()
-}
-
-/// The pixel grid of a patch of points spaced `step` metres on the plane through `x` with
-/// normal `n`, as `cam` sees it: the projection of x and the pixel steps of the two tangent
-/// axes (the projection is linearized at x). `None` when x is behind the camera.
-pub fn patch_grid(
-    cam: &Camera,
-    x: &Vector3<f64>,
-    n: &Vector3<f64>,
-    step: f64,
-) -> Option<(Vector2<f64>, Vector2<f64>, Vector2<f64>)> {
-    let helper = if n.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
-    let t1 = n.cross(&helper).normalize() * step;
-    let t2 = n.cross(&t1);
-    let (xp, a, b) = (
-        cam.project(x)?,
-        cam.project(&(x + t1))?,
-        cam.project(&(x + t2))?,
-    );
-    Some((xp, a - xp, b - xp))
-}
-
-/// The grey values of a `window` x `window` patch of points spaced `step` metres on the
-/// plane through `x` with normal `n`, as camera `cam` sees it; `None` when it leaves the
-/// image.
-pub fn sample_patch(
-    cam: &Camera,
-    image: &GreyImage,
-    x: &Vector3<f64>,
-    n: &Vector3<f64>,
-    window: usize,
-    step: f64,
-) -> Option<Vec<f32>> {
-    let (origin, du, dv) = patch_grid(cam, x, n, step)?;
-    let mut patch = vec![0.0; window * window];
-    image
-        .sample_grid(origin, du, dv, window, &mut patch)
-        .then_some(patch)
-}
-
-/// Zero mean and unit norm in place; all zeros for a flat patch (it correlates 0 with
-/// anything).
-fn normalize(patch: &mut [f32]) {
-    let mean = sum(patch) / patch.len() as f32;
-    patch.iter_mut().for_each(|v| *v -= mean);
-    let norm = dot(patch, patch).sqrt();
-    let scale = if norm < 1e-3 { 0.0 } else { 1.0 / norm };
-    patch.iter_mut().for_each(|v| *v *= scale);
-}
-
-/// Sum of a slice in eight independent lanes (so that it vectorizes).
-fn sum(a: &[f32]) -> f32 {
-    let mut lanes = [0.0f32; 8];
-    let chunks = a.chunks_exact(8);
-    let rest: f32 = chunks.remainder().iter().sum();
-    for c in chunks {
-        for k in 0..8 {
-            lanes[k] += c[k];
-        }
-    }
-    lanes.iter().sum::<f32>() + rest
-}
-
-/// Dot product of two equally long slices in eight independent lanes.
-pub fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut lanes = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let rest: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            lanes[k] += x[k] * y[k];
-        }
-    }
-    lanes.iter().sum::<f32>() + rest
-}
-
-/// The mean ZNCC of raw patch pairs laid out as `[a0, b0, a1, b1, ...]`, `len` values per
-/// patch (the benchmark's kernel: normalize both, one dot product), over all cores.
-pub fn zncc_of_pairs(data: &[f32], len: usize) -> f64 {
-    let sum: f64 = data
-        .par_chunks(2 * len)
-        .map_init(
-            || vec![0.0f32; 2 * len],
-            |buf, pair| {
-                buf.copy_from_slice(pair);
-                let (a, b) = buf.split_at_mut(len);
-                normalize(a);
-                normalize(b);
-                dot(a, b) as f64
-            },
-        )
-        .sum();
-    sum / (data.len() / (2 * len)).max(1) as f64
-}
-
-/// Depth maps of a closed mesh through every camera (metres along the optical axis;
-/// infinity where the mesh is not seen), by z-buffer rasterization of its triangles.
-pub fn depth_maps(cams: &[Camera], mesh: &TriMesh) -> Vec<Vec<f32>> {
-    cams.par_iter()
-        .map(|cam| crate::geometry::raster::depth_map(cam, &mesh.vertices, &mesh.triangles))
-        .collect()
-}
-
-/// The farthest depth of the 2 x 2 pixels around the projection `(x, y)`: a vertex is
-/// hidden only if every pixel around it sees something closer.
-pub(crate) fn farthest_around(depth: &[f32], width: usize, height: usize, x: f64, y: f64) -> f32 {
-    let (x0, y0) = (x.floor().max(0.0) as usize, y.floor().max(0.0) as usize);
-    let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
-    depth[y0 * width + x0]
-        .max(depth[y0 * width + x1])
-        .max(depth[y1 * width + x0])
-        .max(depth[y1 * width + x1])
 }
 
 /// The reliability of every vertex of a frame's refined surface.

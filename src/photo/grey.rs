@@ -1,0 +1,122 @@
+//! Grey images for photo-consistency: luminance as f32, Gaussian smoothing, and bilinear
+//! sampling of affine pixel grids.
+
+use nalgebra::Vector2;
+use rayon::prelude::*;
+
+/// A grey image as f32 with bilinear sampling.
+pub struct GreyImage {
+    w: usize,
+    h: usize,
+    px: Vec<f32>,
+}
+
+impl GreyImage {
+    pub fn from_rgb(img: &image::RgbImage) -> GreyImage {
+        GreyImage {
+            w: img.width() as usize,
+            h: img.height() as usize,
+            px: img
+                .pixels()
+                .map(|p| 0.299 * p.0[0] as f32 + 0.587 * p.0[1] as f32 + 0.114 * p.0[2] as f32)
+                .collect(),
+        }
+    }
+
+    /// The image smoothed by a separable Gaussian of `sigma` pixels (kernel radius 3 sigma,
+    /// clamped at the borders); `sigma <= 0` returns a copy.
+    pub fn blurred(&self, sigma: f64) -> GreyImage {
+        if sigma <= 0.0 {
+            return GreyImage {
+                w: self.w,
+                h: self.h,
+                px: self.px.clone(),
+            };
+        }
+        let r = (3.0 * sigma).ceil() as usize;
+        let kernel: Vec<f32> = (0..=2 * r)
+            .map(|i| {
+                let d = i as f64 - r as f64;
+                (-(d * d) / (2.0 * sigma * sigma)).exp() as f32
+            })
+            .collect();
+        let total: f32 = kernel.iter().sum();
+        let kernel: Vec<f32> = kernel.iter().map(|k| k / total).collect();
+        let (w, h) = (self.w, self.h);
+        // Horizontal pass, row by row, on a row padded by clamping.
+        let mut tmp = vec![0.0f32; w * h];
+        tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            let row = &self.px[y * w..(y + 1) * w];
+            let padded: Vec<f32> = (0..w + 2 * r)
+                .map(|i| row[(i as i64 - r as i64).clamp(0, w as i64 - 1) as usize])
+                .collect();
+            for (k, kv) in kernel.iter().enumerate() {
+                out.iter_mut()
+                    .zip(&padded[k..k + w])
+                    .for_each(|(o, v)| *o += kv * v);
+            }
+        });
+        // Vertical pass: each output row is a weighted sum of whole rows.
+        let mut px = vec![0.0f32; w * h];
+        px.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            for (k, kv) in kernel.iter().enumerate() {
+                let sy = (y as i64 + k as i64 - r as i64).clamp(0, h as i64 - 1) as usize;
+                let src = &tmp[sy * w..(sy + 1) * w];
+                out.iter_mut().zip(src).for_each(|(o, v)| *o += kv * v);
+            }
+        });
+        GreyImage {
+            w: self.w,
+            h: self.h,
+            px,
+        }
+    }
+
+    /// Samples bilinearly the `window` x `window` grid `origin + i du + j dv` (pixels,
+    /// i and j from -window/2 to window/2) into `out`; false when a sample leaves the image.
+    pub fn sample_grid(
+        &self,
+        origin: Vector2<f64>,
+        du: Vector2<f64>,
+        dv: Vector2<f64>,
+        window: usize,
+        out: &mut [f32],
+    ) -> bool {
+        let half = (window / 2) as f64;
+        // The grid is affine: inside the image iff its four corners are. A small margin
+        // below the last row and column keeps every sample's right and lower neighbours in
+        // the image despite f32 rounding.
+        let (wm, hm) = ((self.w - 1) as f64 - 1e-3, (self.h - 1) as f64 - 1e-3);
+        for (si, sj) in [(-half, -half), (half, -half), (-half, half), (half, half)] {
+            let q = origin + du * si + dv * sj;
+            if !(q.x >= 0.0 && q.y >= 0.0 && q.x <= wm && q.y <= hm) {
+                return false;
+            }
+        }
+        let x0 = (origin.x - half * (du.x + dv.x)) as f32;
+        let y0 = (origin.y - half * (du.y + dv.y)) as f32;
+        let (dux, duy, dvx, dvy) = (du.x as f32, du.y as f32, dv.x as f32, dv.y as f32);
+        let w = self.w;
+        let p = &self.px;
+        for (j, row) in out.chunks_exact_mut(window).take(window).enumerate() {
+            let (rx, ry) = (x0 + dvx * j as f32, y0 + dvy * j as f32);
+            for (i, o) in row.iter_mut().enumerate() {
+                let (x, y) = (rx + dux * i as f32, ry + duy * i as f32);
+                let (xi, yi) = (x as usize, y as usize);
+                let (fx, fy) = (x - xi as f32, y - yi as f32);
+                let k = yi * w + xi;
+                let (a, b) = (p[k], p[k + 1]);
+                let (c, d) = (p[k + w], p[k + w + 1]);
+                let top = a + (b - a) * fx;
+                let bottom = c + (d - c) * fx;
+                *o = top + (bottom - top) * fy;
+            }
+        }
+        true
+    }
+}
+
+/// Grey images of a frame.
+pub fn grey(images: &[image::RgbImage]) -> Vec<GreyImage> {
+    images.par_iter().map(GreyImage::from_rgb).collect()
+}

@@ -1,0 +1,13 @@
+//! The photo-consistency primitives the graph cut (stage 3), the reliability (stage 4), the
+//! evaluation and the exports share: grey images ([`grey`]), patches on a tangent plane
+//! ([`patch`]), ZNCC ([`zncc`]) and depth maps for visibility ([`depth`]).
+
+pub mod depth;
+pub mod grey;
+pub mod patch;
+pub mod zncc;
+
+pub use depth::{depth_maps, farthest_around, splatted_depth_maps};
+pub use grey::{grey, GreyImage};
+pub use patch::{patch_grid, sample_patch};
+pub use zncc::{dot, normalize, zncc, zncc_of_pairs};
