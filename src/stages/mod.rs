@@ -264,7 +264,15 @@ fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let mut files = Vec::new();
     for c in 0..seq.cameras.len() {
         let mask = match method {
-            SilhouetteMethod::Masks => seq.load_mask(c, frame)?.expect("masks present"),
+            SilhouetteMethod::Masks => {
+                let mask = seq.load_mask(c, frame)?.expect("masks present");
+                let p = &ctx.config.silhouette;
+                if p.clean_given {
+                    silhouette::clean_given(&mask, p)
+                } else {
+                    mask
+                }
+            }
             SilhouetteMethod::Constant => {
                 silhouette::subtract_constant(&seq.load_frame(c, frame)?, &ctx.config.silhouette)
             }

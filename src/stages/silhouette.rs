@@ -56,6 +56,10 @@ pub struct SilhouetteParams {
     /// Method `constant`: a pixel farther than this from `background_color` (Euclidean RGB
     /// distance, 8-bit levels) is foreground. Default 48.
     pub constant_threshold: f64,
+    /// Given masks get the same clean-up as subtracted ones (opening, closing, small holes
+    /// filled, small components dropped): for real masks with specks, floor blobs or a
+    /// cable line. Default false: given masks are used as they are.
+    pub clean_given: bool,
 }
 
 impl Default for SilhouetteParams {
@@ -71,6 +75,7 @@ impl Default for SilhouetteParams {
             min_component_fraction: 0.01,
             background_color: [0, 0, 0],
             constant_threshold: 48.0,
+            clean_given: false,
         }
     }
 }
@@ -225,6 +230,13 @@ pub fn subtract_constant(frame: &RgbImage, p: &SilhouetteParams) -> GrayImage {
     to_image(&clean(&raw, w, h, p), w, h)
 }
 
+/// A given mask (pixels of 128 and above are the subject) after [`clean`].
+pub fn clean_given(mask: &GrayImage, p: &SilhouetteParams) -> GrayImage {
+    let (w, h) = (mask.width() as usize, mask.height() as usize);
+    let raw: Vec<bool> = mask.as_raw().iter().map(|&v| v >= 128).collect();
+    to_image(&clean(&raw, w, h, p), w, h)
+}
+
 fn to_image(mask: &[bool], w: usize, h: usize) -> GrayImage {
     GrayImage::from_raw(
         w as u32,
@@ -241,13 +253,7 @@ pub fn subtract_background(
     p: &SilhouetteParams,
 ) -> GrayImage {
     let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let mask = clean(&classify(frame, background, p), w, h, p);
-    GrayImage::from_raw(
-        w as u32,
-        h as u32,
-        mask.iter().map(|&m| if m { 255 } else { 0 }).collect(),
-    )
-    .expect("sizes match")
+    to_image(&clean(&classify(frame, background, p), w, h, p), w, h)
 }
 
 #[cfg(test)]
@@ -274,5 +280,44 @@ mod tests {
         let count = m.pixels().filter(|p| p.0[0] == 255).count();
         assert_eq!(count, 100);
         assert_eq!(m.get_pixel(25, 15).0[0], 255);
+    }
+
+    /// A given mask with specks, a small floor blob, a one-pixel cable line and a small hole
+    /// comes back as the subject alone with `clean_given`.
+    #[test]
+    fn given_masks_are_cleaned_on_request() {
+        let (w, h) = (160u32, 120u32);
+        let disc = |x: u32, y: u32| (x as f64 - 80.0).powi(2) + (y as f64 - 60.0).powi(2) <= 900.0;
+        let truth =
+            GrayImage::from_fn(w, h, |x, y| image::Luma([if disc(x, y) { 255 } else { 0 }]));
+        let mut given = truth.clone();
+        for k in 0..25u32 {
+            given.put_pixel((k * 37) % w, (k * 53 + 7) % 20, image::Luma([255]));
+            // specks
+        }
+        for x in 0..6 {
+            for y in 110..114 {
+                given.put_pixel(10 + x, y, image::Luma([255])); // a floor blob of 24 pixels
+            }
+        }
+        for x in 110..160 {
+            given.put_pixel(x, 60, image::Luma([255])); // a cable from the subject
+        }
+        given.put_pixel(80, 60, image::Luma([0])); // a hole in the subject
+        let iou = |m: &GrayImage| {
+            let (mut both, mut either) = (0, 0);
+            for (a, b) in m.pixels().zip(truth.pixels()) {
+                let (a, b) = (a.0[0] >= 128, b.0[0] >= 128);
+                both += (a && b) as usize;
+                either += (a || b) as usize;
+            }
+            both as f64 / either as f64
+        };
+        let cleaned = clean_given(&given, &SilhouetteParams::default());
+        assert!(iou(&given) < 0.97, "the damage shows: {}", iou(&given));
+        assert!(iou(&cleaned) > 0.99, "cleaned: {}", iou(&cleaned));
+        assert_eq!(cleaned.get_pixel(80, 60).0[0], 255, "the hole is filled");
+        assert_eq!(cleaned.get_pixel(140, 60).0[0], 0, "the cable is gone");
+        assert_eq!(cleaned.get_pixel(12, 112).0[0], 0, "the floor blob is gone");
     }
 }
