@@ -25,8 +25,7 @@ fn sample_run() -> &'static Path {
     CELL.get_or_init(|| {
         let dir = process_tempdir();
         let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-        copy_tree(&repo.join("calib"), &dir.path().join("calib"));
-        copy_tree(&repo.join("data"), &dir.path().join("data"));
+        copy_sample_capture(dir.path());
         let yaml = std::fs::read_to_string(repo.join("pipeline.yaml"))
             .unwrap()
             .replace("frames: all", "frames: 0..2")

@@ -9,9 +9,7 @@ use std::path::Path;
 /// A copy of the bundled sample (frames 0..1) with `extra` appended to its pipeline.yaml.
 fn sample(extra: &str) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    copy_tree(&repo.join("calib"), &dir.path().join("calib"));
-    copy_tree(&repo.join("data"), &dir.path().join("data"));
+    copy_sample_capture(dir.path());
     let yaml = hullpose::config::default_yaml("calib/cameras.yaml", "data/tripod")
         .replace("frames: all", "frames: 0..1");
     std::fs::write(dir.path().join("pipeline.yaml"), format!("{yaml}{extra}")).unwrap();

@@ -35,10 +35,7 @@ fn camera_names_that_are_paths_are_refused_and_nothing_escapes() {
     ] {
         let outer = tempfile::tempdir().unwrap();
         let run = outer.path().join("deep/run");
-        let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-        copy_tree(&repo.join("calib"), &run.join("calib"));
-        copy_tree(&repo.join("data"), &run.join("data"));
-        std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+        copy_sample(&run);
         let calib = run.join("calib/cameras.yaml");
         let text = std::fs::read_to_string(&calib).unwrap();
         std::fs::write(
@@ -283,10 +280,7 @@ fn run_cli_bounded(args: &[&str], cwd: &Path) -> Option<(bool, String)> {
 fn non_regular_inputs_are_refused_by_name() {
     let outer = tempfile::tempdir().unwrap();
     let run = outer.path().join("run");
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    copy_tree(&repo.join("calib"), &run.join("calib"));
-    copy_tree(&repo.join("data"), &run.join("data"));
-    std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+    copy_sample(&run);
     let seq = run.join("data/tripod");
     let cases: [(&str, &str, &str); 3] = [
         ("skeleton.yaml", "/dev/urandom", "a device"),
@@ -334,8 +328,7 @@ fn outputs_over_inputs_are_refused() {
     let outer = tempfile::tempdir().unwrap();
     let run = outer.path().join("run");
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    copy_tree(&repo.join("calib"), &run.join("calib"));
-    copy_tree(&repo.join("data"), &run.join("data"));
+    copy_sample_capture(&run);
     let yaml = std::fs::read_to_string(repo.join("pipeline.yaml")).unwrap();
     let truth = run.join("data/tripod/ground_truth/joints.csv");
     let before = std::fs::read(&truth).unwrap();
@@ -377,10 +370,7 @@ fn outputs_over_inputs_are_refused() {
 fn the_temporary_sweep_stays_inside_the_cache() {
     let outer = tempfile::tempdir().unwrap();
     let run = outer.path().join("run");
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    copy_tree(&repo.join("calib"), &run.join("calib"));
-    copy_tree(&repo.join("data"), &run.join("data"));
-    std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+    copy_sample(&run);
     let args = [
         "run",
         "pipeline.yaml",
@@ -497,9 +487,7 @@ fn check_refuses_what_run_would_refuse_later() {
     for (what, edit, expect) in cases {
         let outer = tempfile::tempdir().unwrap();
         let run = outer.path().join("run");
-        copy_tree(&repo.join("calib"), &run.join("calib"));
-        copy_tree(&repo.join("data"), &run.join("data"));
-        std::fs::copy(repo.join("pipeline.yaml"), run.join("pipeline.yaml")).unwrap();
+        copy_sample(&run);
         edit(&run);
         for command in ["check", "run"] {
             let (ok, err) = run_cli_bounded(&[command, "pipeline.yaml"], &run).unwrap();
@@ -536,8 +524,7 @@ fn messages_say_what_is_wrong() {
     }
     let run = outer.path().join("run");
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    copy_tree(&repo.join("calib"), &run.join("calib"));
-    copy_tree(&repo.join("data"), &run.join("data"));
+    copy_sample_capture(&run);
     let yaml = std::fs::read_to_string(repo.join("pipeline.yaml")).unwrap();
     let check = |text: &str, env: Option<(&str, &str)>| -> String {
         std::fs::write(run.join("p.yaml"), text).unwrap();

@@ -380,10 +380,7 @@ fn bad_pipeline_input_gives_clear_errors() {
 fn keys_do_not_depend_on_how_the_project_path_is_spelled() {
     let outer = tempfile::tempdir().unwrap();
     let project = outer.path().join("pk");
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    copy_tree(&repo.join("calib"), &project.join("calib"));
-    copy_tree(&repo.join("data"), &project.join("data"));
-    std::fs::copy(repo.join("pipeline.yaml"), project.join("pipeline.yaml")).unwrap();
+    copy_sample(&project);
     let until = ["--until", "model", "--frames", "0..2"];
     let run = |file: &Path, cwd: &Path| {
         let mut args = vec!["run", file.to_str().unwrap()];
@@ -420,10 +417,7 @@ fn keys_do_not_depend_on_how_the_project_path_is_spelled() {
 fn damaged_cache_files_are_recomputed_with_a_note() {
     let outer = tempfile::tempdir().unwrap();
     let project = outer.path().join("pk");
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    copy_tree(&repo.join("calib"), &project.join("calib"));
-    copy_tree(&repo.join("data"), &project.join("data"));
-    std::fs::copy(repo.join("pipeline.yaml"), project.join("pipeline.yaml")).unwrap();
+    copy_sample(&project);
     let args = ["run", "pipeline.yaml", "--frames", "0..1", "--until", "fit"];
     let (ok, _, err) = run_cli(&args, &project);
     assert!(ok, "{err}");

@@ -328,6 +328,20 @@ pub fn run_cli(args: &[&str], cwd: &Path) -> (bool, String, String) {
     )
 }
 
+/// Copies the bundled sample capture (`calib/` and `data/`) into the folder `to`.
+pub fn copy_sample_capture(to: &Path) {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    copy_tree(&repo.join("calib"), &to.join("calib"));
+    copy_tree(&repo.join("data"), &to.join("data"));
+}
+
+/// Copies the bundled sample capture with its `pipeline.yaml` into the folder `to`.
+pub fn copy_sample(to: &Path) {
+    copy_sample_capture(to);
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::fs::copy(repo.join("pipeline.yaml"), to.join("pipeline.yaml")).unwrap();
+}
+
 /// Copies a folder tree.
 pub fn copy_tree(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
