@@ -7,7 +7,7 @@ use std::path::Path;
 
 fn write_png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<()> {
     crate::fsutil::write_atomic_with(path, |out| {
-        PngEncoder::new_with_quality(out, CompressionType::Default, FilterType::Adaptive)
+        PngEncoder::new_with_quality(out, CompressionType::Fast, FilterType::Adaptive)
             .write_image(data, w, h, color)
             .map_err(|e| std::io::Error::other(e.to_string()))
     })

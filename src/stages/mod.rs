@@ -510,7 +510,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         &mut report,
     );
     spinner.finish_and_clear();
-    let cones = visual_hull::cones(cams, &masks, &ctx.config.visual_hull);
+    let cones = visual_hull::cones(cams, &masks, &ctx.config.visual_hull, &grid);
     let (refined_sdf, mesh) = graphcut::mesh(&grid, &refined, &sdf, &cones, p.smoothing_iterations);
     write_reconstruction(
         &dir,

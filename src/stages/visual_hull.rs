@@ -555,7 +555,7 @@ pub fn reconstruct(
     }
     fill_cavities(&grid, &mut occupied);
     let mut sdf = box_blur_3d(&grid, &signed_distance(&grid, &occupied));
-    let cones = cones(cams, masks, p);
+    let cones = cones(cams, masks, p, &grid);
     let mut mesh = mesh_sdf(&grid, &on_the_cones(&grid, &sdf, &cones));
     taubin(&mut mesh, p.smoothing_iterations);
     with_occupancy_sign(&mut sdf, &occupied);
@@ -594,13 +594,17 @@ pub fn on_the_cones(grid: &GridSpec, sdf: &[f32], cones: &ConeDistance) -> Vec<f
         .collect()
 }
 
-/// The distance to the silhouette cones with the carving's rules (`all_but`, `min_views`).
+/// The distance to the silhouette cones with the carving's rules (`all_but`, `min_views`),
+/// for the voxels of `grid`, exact as far as [`on_the_cones`] reads it.
 pub fn cones<'a>(
     cams: &'a [Camera],
     masks: &[GrayImage],
     p: &VisualHullParams,
+    grid: &GridSpec,
 ) -> ConeDistance<'a> {
-    ConeDistance::new(cams, masks, p.all_but, p.min_views)
+    // on_the_cones clamps the cones to within r of an occupancy distance below r.
+    let reach = 2.0 * CONE_REACH * grid.voxel;
+    ConeDistance::new(cams, masks, p.all_but, p.min_views, grid, reach)
 }
 
 /// Gives the stored signed distance the sign of the occupancy it was computed from (-1 um
