@@ -55,6 +55,12 @@ fn zncc_separates_true_from_false_surface() {
         let (frame, false_vertices, auc, rho_false, rho_true) = (r[0], r[2], r[3], r[4], r[5]);
         assert!(false_vertices > 1000.0, "t{frame}: phantom volume present");
         assert!(auc >= 0.85, "t{frame}: ROC AUC {auc}");
+        // Where ZNCC is defined (two or more cameras see the vertex).
+        assert!(
+            r[6] >= 0.95,
+            "t{frame}: ROC AUC over seen vertices {}",
+            r[6]
+        );
         assert!(
             rho_false < 0.2,
             "t{frame}: mean rho_p of false vertices {rho_false}"

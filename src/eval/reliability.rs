@@ -2,6 +2,11 @@
 //! meshes: every reconstructed vertex within one voxel of the true surface is *true*, every
 //! vertex more than two voxels away (phantom volume, bridges between touching parts) is
 //! *false*; vertices in between are left out.
+//!
+//! Two AUCs: over all labelled vertices, and over those seen by two or more cameras, where
+//! ZNCC is defined. A vertex fewer than two cameras see scores -1 whatever it is, so the first
+//! also measures how much of the true surface the cameras miss (tripod t0: 16% of the true
+//! vertices, AUC 0.86 over all, 0.997 over the seen ones).
 
 use crate::error::Result;
 use crate::runner::Job;
@@ -18,6 +23,8 @@ pub struct ReliabilityRow {
     /// ROC AUC of ZNCC as a classifier of true vs false vertices (1 perfect, 0.5 chance);
     /// NaN when one class is empty.
     pub auc: f64,
+    /// The same over the vertices seen by two or more cameras.
+    pub auc_seen: f64,
     /// Mean rho_p of the false vertices.
     pub rho_p_false: f64,
     /// Mean rho_p of the true vertices seen by three or more cameras.
@@ -92,11 +99,23 @@ pub fn evaluate(job: &Job) -> Result<Vec<ReliabilityRow>> {
             .filter(|&i| is_false(i))
             .map(|i| obs.zncc[i])
             .collect();
+        let seen = |i: &usize| obs.cameras[*i] >= 2;
+        let pos_seen: Vec<f32> = (0..n)
+            .filter(|&i| is_true(i))
+            .filter(seen)
+            .map(|i| obs.zncc[i])
+            .collect();
+        let neg_seen: Vec<f32> = (0..n)
+            .filter(|&i| is_false(i))
+            .filter(seen)
+            .map(|i| obs.zncc[i])
+            .collect();
         rows.push(ReliabilityRow {
             frame,
             true_vertices: pos.len(),
             false_vertices: neg.len(),
             auc: roc_auc(&pos, &neg),
+            auc_seen: roc_auc(&pos_seen, &neg_seen),
             rho_p_false: mean((0..n).filter(|&i| is_false(i)).map(|i| obs.rho_p[i])),
             rho_p_true_seen3: mean(
                 (0..n)
@@ -110,13 +129,20 @@ pub fn evaluate(job: &Job) -> Result<Vec<ReliabilityRow>> {
 
 /// The CSV text of reliability rows.
 pub fn to_csv(rows: &[ReliabilityRow]) -> String {
-    let mut s =
-        String::from("frame,true_vertices,false_vertices,roc_auc,rho_p_false,rho_p_true_seen3\n");
+    let mut s = String::from(
+        "frame,true_vertices,false_vertices,roc_auc,rho_p_false,rho_p_true_seen3,roc_auc_seen\n",
+    );
     for r in rows {
         let _ = writeln!(
             s,
-            "{},{},{},{:.4},{:.4},{:.4}",
-            r.frame, r.true_vertices, r.false_vertices, r.auc, r.rho_p_false, r.rho_p_true_seen3
+            "{},{},{},{:.4},{:.4},{:.4},{:.4}",
+            r.frame,
+            r.true_vertices,
+            r.false_vertices,
+            r.auc,
+            r.rho_p_false,
+            r.rho_p_true_seen3,
+            r.auc_seen
         );
     }
     s
@@ -125,14 +151,20 @@ pub fn to_csv(rows: &[ReliabilityRow]) -> String {
 /// A printed table of reliability rows.
 pub fn table(rows: &[ReliabilityRow]) -> String {
     let mut s = format!(
-        "{:>6}  {:>6}  {:>6}  {:>7}  {:>11}  {:>15}\n",
-        "frame", "true", "false", "ROC AUC", "rho_p false", "rho_p true (3+)"
+        "{:>6}  {:>6}  {:>6}  {:>7}  {:>11}  {:>11}  {:>15}\n",
+        "frame", "true", "false", "ROC AUC", "AUC seen 2+", "rho_p false", "rho_p true (3+)"
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{:>6}  {:>6}  {:>6}  {:>7.3}  {:>11.3}  {:>15.3}",
-            r.frame, r.true_vertices, r.false_vertices, r.auc, r.rho_p_false, r.rho_p_true_seen3
+            "{:>6}  {:>6}  {:>6}  {:>7.3}  {:>11.3}  {:>11.3}  {:>15.3}",
+            r.frame,
+            r.true_vertices,
+            r.false_vertices,
+            r.auc,
+            r.auc_seen,
+            r.rho_p_false,
+            r.rho_p_true_seen3
         );
     }
     s
