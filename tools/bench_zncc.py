@@ -41,6 +41,6 @@ n = len(a)
 print(f"numpy zncc of the same {n} pairs: {best*1e3:.1f} ms, {n/best/1e6:.2f} M pairs/s "
       f"(mean zncc {z.mean():.4f})")
 rust_kernel = float(out.split("zncc of the dumped pairs: ")[1].split(" ms")[0])
-stage = float(out.split("pair-ZNCCs, ")[1].split(" M pairs/s")[0])
+stage = float(out.split(" camera pairs, ")[1].split(" M pairs/s")[0])
 print(f"ratio, crate kernel / numpy: {best*1e3/rust_kernel:.1f}x; "
-      f"stage with sampling ({stage:.2f} M pairs/s) / numpy: {stage/(n/best/1e6):.1f}x")
+      f"stage with sampling and the normal search ({stage:.2f} M camera pairs/s) / numpy: {stage/(n/best/1e6):.1f}x")

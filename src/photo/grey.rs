@@ -43,28 +43,39 @@ impl GreyImage {
         let total: f32 = kernel.iter().sum();
         let kernel: Vec<f32> = kernel.iter().map(|k| k / total).collect();
         let (w, h) = (self.w, self.h);
-        // Horizontal pass, row by row, on a row padded by clamping.
-        let mut tmp = vec![0.0f32; w * h];
-        tmp.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+        // Horizontal pass, row by row, on a row padded by clamping. Outputs are written
+        // before they are read: accumulating into freshly zeroed memory would fault every
+        // page twice (the shared zero page, then a copy on write).
+        let mut tmp = Vec::with_capacity(w * h);
+        tmp.par_extend((0..h).into_par_iter().flat_map_iter(|y| {
             let row = &self.px[y * w..(y + 1) * w];
             let padded: Vec<f32> = (0..w + 2 * r)
                 .map(|i| row[(i as i64 - r as i64).clamp(0, w as i64 - 1) as usize])
                 .collect();
-            for (k, kv) in kernel.iter().enumerate() {
+            let mut out: Vec<f32> = padded[..w].iter().map(|v| kernel[0] * v).collect();
+            for (k, kv) in kernel.iter().enumerate().skip(1) {
                 out.iter_mut()
                     .zip(&padded[k..k + w])
                     .for_each(|(o, v)| *o += kv * v);
             }
-        });
+            out
+        }));
         // Vertical pass: each output row is a weighted sum of whole rows.
-        let mut px = vec![0.0f32; w * h];
-        px.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
-            for (k, kv) in kernel.iter().enumerate() {
-                let sy = (y as i64 + k as i64 - r as i64).clamp(0, h as i64 - 1) as usize;
-                let src = &tmp[sy * w..(sy + 1) * w];
-                out.iter_mut().zip(src).for_each(|(o, v)| *o += kv * v);
+        let tmp_row = |y: i64| {
+            let sy = y.clamp(0, h as i64 - 1) as usize;
+            &tmp[sy * w..(sy + 1) * w]
+        };
+        let mut px = Vec::with_capacity(w * h);
+        px.par_extend((0..h).into_par_iter().flat_map_iter(|y| {
+            let top = y as i64 - r as i64;
+            let mut out: Vec<f32> = tmp_row(top).iter().map(|v| kernel[0] * v).collect();
+            for (k, kv) in kernel.iter().enumerate().skip(1) {
+                out.iter_mut()
+                    .zip(tmp_row(top + k as i64))
+                    .for_each(|(o, v)| *o += kv * v);
             }
-        });
+            out
+        }));
         GreyImage {
             w: self.w,
             h: self.h,
