@@ -274,7 +274,7 @@ pub fn vertex_zncc(
                     return (best.clamp(-1.0, 1.0), k as u8);
                 }
                 let (below, above) = (score(-1), score(1));
-                let (mut at, step) = if above > best && above >= below {
+                let (mut at, step): (i64, i64) = if above > best && above >= below {
                     (1, 1)
                 } else if below > best {
                     (-1, -1)
@@ -282,7 +282,7 @@ pub fn vertex_zncc(
                     (0, 0)
                 };
                 best = best.max(below).max(above);
-                while step != 0 && (at + step as i64).abs() <= steps {
+                while step != 0 && (at + step).abs() <= steps {
                     let z = score(at + step);
                     if z <= best {
                         break;
