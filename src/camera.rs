@@ -172,6 +172,21 @@ impl Camera {
         n
     }
 
+    /// The same camera with its image scaled by `factor` (0.5: half the width and height):
+    /// pixel centres stay at integer coordinates, so a pixel x maps to (x + 0.5) factor - 0.5.
+    pub fn scaled(&self, factor: f64) -> Camera {
+        Camera {
+            width: ((self.width as f64 * factor).ceil() as u32).max(1),
+            height: ((self.height as f64 * factor).ceil() as u32).max(1),
+            fx: self.fx * factor,
+            fy: self.fy * factor,
+            skew: self.skew * factor,
+            cx: (self.cx + 0.5) * factor - 0.5,
+            cy: (self.cy + 0.5) * factor - 0.5,
+            ..self.clone()
+        }
+    }
+
     /// Normalized (undistorted) coordinates to a pixel.
     pub fn normalized_to_pixel(&self, n: Vector2<f64>) -> Vector2<f64> {
         let d = self.distort(n);

@@ -153,14 +153,16 @@ pub fn camera_index(seq: &Sequence, calibration: &Path, name: &str) -> Result<us
         })
 }
 
-/// Tiles `images` (with their `labels`) into one picture, `columns` per row, each scaled to
-/// `tile_width` pixels wide.
+/// Tiles `images` (with their `labels`) into one picture, `columns` per row, each shrunk to
+/// about `tile_width` pixels wide by an integer factor (box-averaged: cheap, and sharp
+/// enough for a sheet).
 pub fn contact_sheet(images: &[RgbImage], labels: &[String], tile_width: u32) -> RgbImage {
     let n = images.len().max(1);
     let columns = (n as f64).sqrt().ceil() as u32;
     let rows = (n as u32).div_ceil(columns);
     let (w0, h0) = images.first().map_or((1, 1), |i| (i.width(), i.height()));
-    let tile_height = ((h0 as f64 * tile_width as f64 / w0 as f64).round() as u32).max(1);
+    let factor = ((w0 as f64 / tile_width as f64).round() as u32).max(1);
+    let (tile_width, tile_height) = ((w0 / factor).max(1), (h0 / factor).max(1));
     let gap = 4;
     let mut sheet = RgbImage::from_pixel(
         columns * (tile_width + gap) + gap,
@@ -168,12 +170,7 @@ pub fn contact_sheet(images: &[RgbImage], labels: &[String], tile_width: u32) ->
         Rgb([32, 32, 32]),
     );
     for (i, (img, label)) in images.iter().zip(labels).enumerate() {
-        let tile = image::imageops::resize(
-            img,
-            tile_width,
-            tile_height,
-            image::imageops::FilterType::Triangle,
-        );
+        let tile = shrink(img, factor);
         let (col, row) = (i as u32 % columns, i as u32 / columns);
         let (x, y) = (
             gap + col * (tile_width + gap),
@@ -189,6 +186,26 @@ pub fn contact_sheet(images: &[RgbImage], labels: &[String], tile_width: u32) ->
         );
     }
     sheet
+}
+
+/// `img` shrunk by an integer `factor`: each pixel the mean of a `factor` x `factor` block
+/// (a partial block at the right and bottom edges is dropped).
+pub fn shrink(img: &RgbImage, factor: u32) -> RgbImage {
+    let f = factor.max(1);
+    let (w, h) = ((img.width() / f).max(1), (img.height() / f).max(1));
+    let count = (f * f).min(img.width() * img.height()).max(1);
+    RgbImage::from_fn(w, h, |x, y| {
+        let mut sum = [0u32; 3];
+        for dy in 0..f.min(img.height()) {
+            for dx in 0..f.min(img.width()) {
+                let p = img.get_pixel(x * f + dx, y * f + dy).0;
+                for (s, v) in sum.iter_mut().zip(p) {
+                    *s += v as u32;
+                }
+            }
+        }
+        Rgb(sum.map(|s| ((s + count / 2) / count) as u8))
+    })
 }
 
 /// [`mesh_beside_frame`] for a job's cached reconstruction (`stage`: visual_hull or graphcut)

@@ -306,7 +306,8 @@ fn overlays_and_contact_sheets_are_written() {
         "skeleton and outline drawn: {changed} pixels"
     );
     let sheet = image::open(dir.join("output/export/overlays/contact/000002.png")).unwrap();
-    assert!(sheet.width() > 4 * 320 && sheet.height() > 3 * 240);
+    // Frames narrower than a tile keep their size.
+    assert!(sheet.width() > 4 * 256 && sheet.height() > 3 * 192);
 }
 
 #[test]

@@ -14,6 +14,7 @@ use crate::error::Result;
 use crate::geometry::obj::write_obj;
 use crate::geometry::ply::{read_ply, write_ply, PlyFormat, VertexAttributes};
 use crate::geometry::TriMesh;
+use crate::skeleton::model::BodyModel;
 use crate::stages::{hull_files, Context};
 use image::RgbImage;
 use nalgebra::Vector3;
@@ -22,7 +23,8 @@ use std::path::Path;
 
 /// Per vertex of `mesh` (normals `normals`): the cos-weighted mean colour over the cameras
 /// that see it (facing it, and not hidden behind the mesh by more than `tolerance` metres in
-/// the camera's depth map), and how many cameras see it. Unseen vertices are mid grey.
+/// the camera's depth map, rasterized at half resolution: a quarter of the cost, and the
+/// tolerance is over a voxel), and how many cameras see it. Unseen vertices are mid grey.
 pub fn image_colours(
     cams: &[Camera],
     images: &[RgbImage],
@@ -30,7 +32,8 @@ pub fn image_colours(
     normals: &[Vector3<f64>],
     tolerance: f64,
 ) -> (Vec<[u8; 3]>, Vec<f32>) {
-    let depth = crate::photo::depth_maps(cams, mesh);
+    let coarse: Vec<Camera> = cams.iter().map(|c| c.scaled(0.5)).collect();
+    let depth = crate::photo::depth_maps(&coarse, mesh);
     let centres: Vec<Vector3<f64>> = cams.iter().map(Camera::centre).collect();
     mesh.vertices
         .par_iter()
@@ -47,8 +50,9 @@ pub fn image_colours(
                 if z <= 0.0 || !cam.in_image(&px) {
                     continue;
                 }
-                let (w, h) = (cam.width as usize, cam.height as usize);
-                let front = crate::photo::farthest_around(&depth[c], w, h, px.x, px.y);
+                let (w, h) = (coarse[c].width as usize, coarse[c].height as usize);
+                let (qx, qy) = ((px.x + 0.5) * 0.5 - 0.5, (px.y + 0.5) * 0.5 - 0.5);
+                let front = crate::photo::farthest_around(&depth[c], w, h, qx, qy);
                 if z as f32 > front + tolerance as f32 {
                     continue;
                 }
@@ -106,51 +110,71 @@ fn write_one(
         .count())
 }
 
-/// Writes the meshes of `frames` in `formats` (PLY and / or OBJ) under `dir`; returns the
-/// number of files.
-pub fn write(
-    ctx: &Context,
-    frames: &[u32],
-    formats: &[Format],
-    dir: &Path,
-    has_skeleton: bool,
-) -> Result<usize> {
-    let seq = ctx.sequence;
-    let tolerance = ctx.config.reliability.depth_tolerance * ctx.config.visual_hull.voxel_size;
-    let model = if has_skeleton {
-        Some(crate::stages::model::load(ctx)?)
-    } else {
-        None
-    };
-    // The model's part colours and part indices (its PLY quality), the same every frame.
-    let (part_colours, parts): (Vec<[u8; 3]>, Vec<f32>) = model
-        .iter()
-        .flat_map(|m| &m.labels)
-        .map(|&l| (crate::stages::model::part_colour(l), l as f32))
-        .unzip();
-    let mut files = 0;
-    if let Some(m) = &model {
-        files += write_one(
-            formats,
-            &dir.join("model"),
-            &m.mesh,
-            &m.mesh.vertex_normals(),
-            &part_colours,
-            vec![("quality", &parts)],
-        )?;
+/// What every frame's meshes share: the formats, the folder, the visibility tolerance and,
+/// with a skeleton, the body model with its part colours and indices.
+pub struct MeshExport<'a> {
+    formats: Vec<Format>,
+    dir: &'a Path,
+    tolerance: f64,
+    model: Option<BodyModel>,
+    part_colours: Vec<[u8; 3]>,
+    parts: Vec<f32>,
+}
+
+impl<'a> MeshExport<'a> {
+    /// Prepares the export of meshes in `formats` (PLY and / or OBJ) under `dir` and writes
+    /// the body model's (with a skeleton); returns it with the number of files written.
+    pub fn start(
+        ctx: &Context,
+        formats: &[Format],
+        dir: &'a Path,
+        has_skeleton: bool,
+    ) -> Result<(MeshExport<'a>, usize)> {
+        let tolerance = ctx.config.reliability.depth_tolerance * ctx.config.visual_hull.voxel_size;
+        let model = if has_skeleton {
+            Some(crate::stages::model::load(ctx)?)
+        } else {
+            None
+        };
+        // The model's part colours and part indices (its PLY quality), the same every frame.
+        let (part_colours, parts): (Vec<[u8; 3]>, Vec<f32>) = model
+            .iter()
+            .flat_map(|m| &m.labels)
+            .map(|&l| (crate::stages::model::part_colour(l), l as f32))
+            .unzip();
+        let mut files = 0;
+        if let Some(m) = &model {
+            files += write_one(
+                formats,
+                &dir.join("model"),
+                &m.mesh,
+                &m.mesh.vertex_normals(),
+                &part_colours,
+                vec![("quality", &parts)],
+            )?;
+        }
+        let export = MeshExport {
+            formats: formats.to_vec(),
+            dir,
+            tolerance,
+            model,
+            part_colours,
+            parts,
+        };
+        Ok((export, files))
     }
-    // Frames in parallel (each loads its frames once for both formats).
-    let per_frame = frames.par_iter().map(|&frame| -> Result<usize> {
+
+    /// Writes one frame's meshes (`images`: its input frames, for the colours); returns the
+    /// number of files.
+    pub fn frame(&self, ctx: &Context, frame: u32, images: &[RgbImage]) -> Result<usize> {
+        let (formats, dir, tolerance) = (&self.formats, self.dir, self.tolerance);
+        let cams = &ctx.sequence.cameras;
         let mut files = 0;
         let stem = crate::dataset::frame_stem(frame);
-        let images: Vec<RgbImage> = (0..seq.cameras.len())
-            .into_par_iter()
-            .map(|c| seq.load_frame(c, frame))
-            .collect::<Result<_>>()?;
         let (ply, _) = hull_files(frame);
         let hull = read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
         let normals = hull.vertex_normals();
-        let (colours, seen) = image_colours(&seq.cameras, &images, &hull, &normals, tolerance);
+        let (colours, seen) = image_colours(cams, images, &hull, &normals, tolerance);
         files += write_one(
             formats,
             &dir.join("visual_hull").join(&stem),
@@ -161,7 +185,7 @@ pub fn write(
         )?;
         let refined = read_ply(&ctx.cache.stage_dir("graphcut").join(&ply))?;
         let normals = refined.vertex_normals();
-        let (colours, seen) = image_colours(&seq.cameras, &images, &refined, &normals, tolerance);
+        let (colours, seen) = image_colours(cams, images, &refined, &normals, tolerance);
         let observed = crate::stages::load_observed(ctx, frame)
             .ok()
             .filter(|o| o.vertices.len() == refined.vertices.len());
@@ -182,7 +206,7 @@ pub fn write(
             &colours,
             scalars,
         )?;
-        if let Some(m) = &model {
+        if let Some(m) = &self.model {
             let pose = crate::stages::fit::cached_pose(ctx, &m.skeleton, frame)?;
             let posed = m.pose(&pose);
             files += write_one(
@@ -190,15 +214,10 @@ pub fn write(
                 &dir.join("fit").join(&stem),
                 &posed,
                 &posed.vertex_normals(),
-                &part_colours,
-                vec![("quality", &parts)],
+                &self.part_colours,
+                vec![("quality", &self.parts)],
             )?;
         }
         Ok(files)
-    });
-    files += per_frame
-        .collect::<Result<Vec<usize>>>()?
-        .iter()
-        .sum::<usize>();
-    Ok(files)
+    }
 }

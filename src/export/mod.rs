@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::Pose;
 use crate::stages::{Context, Finished};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -155,22 +156,53 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
         None
     };
     let name = ctx.sequence.name();
-    // PLY and OBJ are written in one pass (the colours are computed once per mesh).
+    // Meshes (PLY, OBJ) and overlays are written frame by frame, decoding each frame's
+    // images once for both.
     let mesh_formats: Vec<Format> = formats
         .iter()
         .copied()
         .filter(|f| matches!(f, Format::Ply | Format::Obj))
         .collect();
-    if !mesh_formats.is_empty() {
-        let n = meshes::write(
-            ctx,
-            frames,
-            &mesh_formats,
-            &out.join("meshes"),
-            has_skeleton,
-        )?;
-        written.outputs.push(out.join("meshes"));
-        written.files += n;
+    let meshes_dir = out.join("meshes");
+    let overlays_dir = out.join("overlays");
+    let meshes = if mesh_formats.is_empty() {
+        None
+    } else {
+        let (export, files) =
+            meshes::MeshExport::start(ctx, &mesh_formats, &meshes_dir, has_skeleton)?;
+        written.files += files;
+        written.outputs.push(meshes_dir.clone());
+        Some(export)
+    };
+    let overlays = match (&motion, formats.contains(&Format::Overlay)) {
+        (Some((model, poses)), true) => {
+            written.outputs.push(overlays_dir.clone());
+            Some((model, poses, overlays::chosen_cameras(ctx)?))
+        }
+        _ => None,
+    };
+    if meshes.is_some() || overlays.is_some() {
+        let per_frame = frames.par_iter().map(|&frame| -> Result<usize> {
+            let images: Vec<image::RgbImage> = (0..ctx.sequence.cameras.len())
+                .into_par_iter()
+                .map(|c| ctx.sequence.load_frame(c, frame))
+                .collect::<Result<_>>()?;
+            let mut files = 0;
+            if let Some(export) = &meshes {
+                files += export.frame(ctx, frame, &images)?;
+            }
+            if let Some((model, poses, chosen)) = &overlays {
+                if let Some((_, pose)) = poses.iter().find(|(f, _)| *f == frame) {
+                    let item = (frame, pose);
+                    files += overlays::frame(ctx, model, item, &images, chosen, &overlays_dir)?;
+                }
+            }
+            Ok(files)
+        });
+        written.files += per_frame
+            .collect::<Result<Vec<usize>>>()?
+            .iter()
+            .sum::<usize>();
     }
     for &format in &formats {
         match format {
@@ -192,13 +224,7 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
                 written.outputs.push(path);
                 written.files += 1;
             }
-            Format::Ply | Format::Obj => {}
-            Format::Overlay => {
-                let (model, poses) = motion.as_ref().expect("loaded");
-                let n = overlays::write(ctx, model, poses, &out.join("overlays"))?;
-                written.outputs.push(out.join("overlays"));
-                written.files += n;
-            }
+            Format::Ply | Format::Obj | Format::Overlay => {}
         }
     }
     written.outputs.dedup();

@@ -125,8 +125,11 @@ pub fn rasterize(
 /// triangle mesh through `cam`, for visibility tests: vertices are projected through the
 /// full camera model and triangles filled in pixel space with perspective-correct depth.
 /// Edges are straight in pixels, which for triangles a few pixels wide differs from
-/// [`rasterize`] by far less than a pixel; no back-face culling, no pixel table, so it is
-/// cheap enough to run per frame and camera.
+/// [`rasterize`] by far less than a pixel. Triangles facing away from the camera are
+/// skipped: the mesh must be closed with its triangles wound counter-clockwise seen from
+/// outside (as every mesh of the pipeline is) and the camera outside it, so that the nearest
+/// surface along every ray is a front face. No pixel table, so it is cheap enough to run per
+/// frame and camera.
 pub fn depth_map(cam: &Camera, vertices: &[Vector3<f64>], triangles: &[[u32; 3]]) -> Vec<f32> {
     let (w, h) = (cam.width as usize, cam.height as usize);
     let projected: Vec<(Vector2<f64>, f64)> =
@@ -137,20 +140,27 @@ pub fn depth_map(cam: &Camera, vertices: &[Vector3<f64>], triangles: &[[u32; 3]]
         if za < NEAR || zb < NEAR || zc < NEAR {
             continue;
         }
+        // Pixel y runs down and depth forward: a counter-clockwise front face projects
+        // with a negative signed area.
         let area = (b - a).perp(&(c - a));
-        if area.abs() < 1e-12 {
+        if area > -1e-12 {
             continue;
         }
-        let lo_x = a.x.min(b.x).min(c.x).max(0.0).ceil();
-        let hi_x = a.x.max(b.x).max(c.x).min((w - 1) as f64).floor();
-        let lo_y = a.y.min(b.y).min(c.y).max(0.0).ceil();
-        let hi_y = a.y.max(b.y).max(c.y).min((h - 1) as f64).floor();
+        let (hi_x, hi_y) = (a.x.max(b.x).max(c.x), a.y.max(b.y).max(c.y));
+        if hi_x < 0.0 || hi_y < 0.0 {
+            continue;
+        }
+        // Truncation is floor here (non-negative values): no call to floor or ceil.
+        let lo_x = ceil_of_non_negative(a.x.min(b.x).min(c.x).max(0.0));
+        let lo_y = ceil_of_non_negative(a.y.min(b.y).min(c.y).max(0.0));
+        let hi_x = hi_x.min((w - 1) as f64) as usize;
+        let hi_y = hi_y.min((h - 1) as f64) as usize;
         if lo_x > hi_x || lo_y > hi_y {
             continue;
         }
         let inv = [1.0 / za, 1.0 / zb, 1.0 / zc];
-        for y in lo_y as usize..=hi_y as usize {
-            for x in lo_x as usize..=hi_x as usize {
+        for y in lo_y..=hi_y {
+            for x in lo_x..=hi_x {
                 let q = Vector2::new(x as f64, y as f64);
                 let l0 = (b - q).perp(&(c - q)) / area;
                 let l1 = (c - q).perp(&(a - q)) / area;
@@ -165,4 +175,14 @@ pub fn depth_map(cam: &Camera, vertices: &[Vector3<f64>], triangles: &[[u32; 3]]
         }
     }
     depth
+}
+
+/// The ceiling of a non-negative number, as an index.
+fn ceil_of_non_negative(v: f64) -> usize {
+    let t = v as usize;
+    if (t as f64) < v {
+        t + 1
+    } else {
+        t
+    }
 }
