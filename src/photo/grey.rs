@@ -113,11 +113,22 @@ impl GreyImage {
             let (rx, ry) = (x0 + dvx * j as f32, y0 + dvy * j as f32);
             for (i, o) in row.iter_mut().enumerate() {
                 let (x, y) = (rx + dux * i as f32, ry + duy * i as f32);
-                let (xi, yi) = (x as usize, y as usize);
+                // SAFETY: the grid is affine and its four corners lie in
+                // [0, w - 1 - 1e-3] x [0, h - 1 - 1e-3] (checked above), so every sample
+                // does: x and y are finite, non-negative and below w - 1 and h - 1, and
+                // k + w + 1 < w h.
+                let (xi, yi): (usize, usize) =
+                    unsafe { (x.to_int_unchecked(), y.to_int_unchecked()) };
                 let (fx, fy) = (x - xi as f32, y - yi as f32);
                 let k = yi * w + xi;
-                let (a, b) = (p[k], p[k + 1]);
-                let (c, d) = (p[k + w], p[k + w + 1]);
+                let (a, b, c, d) = unsafe {
+                    (
+                        *p.get_unchecked(k),
+                        *p.get_unchecked(k + 1),
+                        *p.get_unchecked(k + w),
+                        *p.get_unchecked(k + w + 1),
+                    )
+                };
                 let top = a + (b - a) * fx;
                 let bottom = c + (d - c) * fx;
                 *o = top + (bottom - top) * fy;

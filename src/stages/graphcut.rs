@@ -185,7 +185,11 @@ pub fn refine_timed(
     progress: &mut dyn FnMut(f64, u64),
     timings: &mut Timings,
 ) -> Vec<bool> {
-    let outlines: Vec<Vec<bool>> = silhouettes.par_iter().map(outline).collect();
+    let outlines: Vec<Vec<bool>> = if p.pin_rims {
+        silhouettes.par_iter().map(outline).collect()
+    } else {
+        Vec::new()
+    };
     let start = std::time::Instant::now();
     let h = grid.voxel;
     // Band nodes: hull voxels within `band` of the surface, and within the outer half of the
