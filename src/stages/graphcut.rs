@@ -47,7 +47,7 @@ use crate::geometry::cone_distance::ConeDistance;
 use crate::geometry::grid::{GridSpec, FACE_OFFSETS};
 use crate::geometry::TriMesh;
 use crate::maxflow::GridGraph;
-use crate::photo::{sample_patch, splatted_depth_maps, zncc, GreyImage};
+use crate::photo::{dot, normalize, patch_grid, splatted_depth_maps, GreyImage};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -503,7 +503,10 @@ pub fn patch_consistency(
     n: &Vector3<f64>,
     surface: &Vector3<f64>,
 ) -> f64 {
-    let mut patches: Vec<(Vector3<f64>, Vec<f32>)> = Vec::new();
+    // Patches normalized once (zero mean, unit norm), so each pair's ZNCC is a dot product.
+    let len = p.window * p.window;
+    let mut dirs: Vec<Vector3<f64>> = Vec::with_capacity(cams.len());
+    let mut patches: Vec<f32> = Vec::with_capacity(cams.len() * len);
     for (c, cam) in cams.iter().enumerate() {
         let centre = cam.centre();
         if n.dot(&(centre - surface)) <= 0.0 {
@@ -518,16 +521,25 @@ pub fn patch_consistency(
             continue; // the hull hides the point from this camera
         }
         let step = p.patch_spacing * h;
-        if let Some(patch) = sample_patch(cam, &images[c], x, n, p.window, step) {
-            patches.push(((centre - x).normalize(), patch));
+        let start = patches.len();
+        patches.resize(start + len, 0.0);
+        let out = &mut patches[start..];
+        let sampled = patch_grid(cam, x, n, step)
+            .is_some_and(|(o, du, dv)| images[c].sample_grid(o, du, dv, p.window, out));
+        if sampled {
+            normalize(out);
+            dirs.push((centre - x).normalize());
+        } else {
+            patches.truncate(start);
         }
     }
     let cos_max = p.max_pair_angle_deg.to_radians().cos();
     let mut scores: Vec<f64> = Vec::new();
-    for a in 0..patches.len() {
-        for b in a + 1..patches.len() {
-            if patches[a].0.dot(&patches[b].0) >= cos_max {
-                scores.push(zncc(&patches[a].1, &patches[b].1));
+    for a in 0..dirs.len() {
+        let pa = &patches[a * len..(a + 1) * len];
+        for b in a + 1..dirs.len() {
+            if dirs[a].dot(&dirs[b]) >= cos_max {
+                scores.push(dot(pa, &patches[b * len..(b + 1) * len]) as f64);
             }
         }
     }
