@@ -27,6 +27,9 @@ pub struct Sequence {
     frame_ext: Vec<&'static str>,
     /// Whether given masks (`masks/`) are present.
     pub has_masks: bool,
+    /// Whether the capture has frames (`frames/`); without, it is a masks-only capture: the
+    /// masks give the silhouettes, and there is nothing photo-consistency could use.
+    pub has_frames: bool,
     /// Whether every camera has a background plate.
     pub has_backgrounds: bool,
     /// Things that are odd but not fatal (extra folders, stray files).
@@ -134,11 +137,20 @@ impl Sequence {
     /// holding every frame, that image sizes match the calibration (from the headers), and
     /// the same for masks when present.
     pub fn open(dir: &Path, cameras: Vec<Camera>, calib_path: &Path) -> Result<Sequence> {
-        let frames_dir = dir.join("frames");
+        let masks_dir = dir.join("masks");
+        let has_masks = masks_dir.is_dir();
+        let has_frames = dir.join("frames").is_dir();
+        // A masks-only capture lists its frames from the masks.
+        let frames_dir = if has_frames || !has_masks {
+            dir.join("frames")
+        } else {
+            masks_dir.clone()
+        };
         if !frames_dir.is_dir() {
             return Err(Error::invalid(
-                &frames_dir,
-                "the sequence has no frames/ folder (expected frames/<camera>/NNNNNN.png)",
+                dir,
+                "the sequence has neither a frames/ folder (frames/<camera>/NNNNNN.png) nor a \
+                 masks/ folder (masks/<camera>/NNNNNN.png, for a capture of silhouettes only)",
             ));
         }
         let mut warnings = Vec::new();
@@ -195,8 +207,6 @@ impl Sequence {
             }
             frame_ext.push(list.first().map(|&(_, e)| e).unwrap_or("png"));
         }
-        let masks_dir = dir.join("masks");
-        let has_masks = masks_dir.is_dir();
         let bg_dir = dir.join("background");
         let has_backgrounds = bg_dir.is_dir()
             && cameras
@@ -214,6 +224,7 @@ impl Sequence {
             frames: all.into_iter().collect(),
             frame_ext,
             has_masks,
+            has_frames,
             has_backgrounds,
             warnings,
         };
@@ -235,7 +246,9 @@ impl Sequence {
         let mut jobs: Vec<(usize, PathBuf)> = Vec::new();
         for (c, cam) in self.cameras.iter().enumerate() {
             for &f in &self.frames {
-                jobs.push((c, self.frame_path(c, f)));
+                if self.has_frames {
+                    jobs.push((c, self.frame_path(c, f)));
+                }
                 if self.has_masks {
                     jobs.push((c, self.mask_path(c, f)));
                 }
@@ -311,8 +324,15 @@ impl Sequence {
         Ok(img)
     }
 
-    /// Loads camera `cam`'s frame `frame` as 8-bit RGB.
+    /// Loads camera `cam`'s frame `frame` as 8-bit RGB. A masks-only capture has no frames:
+    /// its mask stands in (white silhouette on black), for overlays and pictures.
     pub fn load_frame(&self, cam: usize, frame: u32) -> Result<RgbImage> {
+        if !self.has_frames {
+            let mask = self
+                .load_mask(cam, frame)?
+                .expect("a masks-only capture has masks");
+            return Ok(image::DynamicImage::ImageLuma8(mask).to_rgb8());
+        }
         self.load_rgb(cam, &self.frame_path(cam, frame))
     }
 

@@ -619,17 +619,22 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let skeleton = seq.skeleton()?;
             let joints = seq.ground_truth_joints()?;
             println!(
-                "{}: {} cameras, {} frames ({}..{}), masks: {}, background plates: {}, skeleton: {}, ground-truth joints: {}",
+                "{}: {} cameras, {} frames ({}..{}), frame images: {}, masks: {}, background plates: {}, skeleton: {}, ground-truth joints: {}",
                 seq.dir.display(),
                 seq.cameras.len(),
                 seq.frames.len(),
                 seq.frames[0],
                 seq.frames[seq.frames.len() - 1],
+                if seq.has_frames { "yes" } else { "no (masks only)" },
                 if seq.has_masks { "yes" } else { "no" },
                 if seq.has_backgrounds { "yes" } else { "no" },
                 skeleton.map_or("no".to_string(), |s| format!("{} bones", s.bones.len())),
                 joints.map_or("no".to_string(), |j| format!("{} rows", j.len())),
             );
+            println!("stages:");
+            for line in hullpose::stages::plan_notes(&job.context())? {
+                println!("  {line}");
+            }
         }
     }
     Ok(())

@@ -468,7 +468,15 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             reused: frames.len() - todo.len(),
             seconds: start.elapsed().as_secs_f64(),
             location: job.cache.stage_dir(stage.name),
-            warnings: warnings.into_iter().flatten().collect(),
+            // A note every frame gives alike is said once.
+            warnings: {
+                let mut seen = std::collections::HashSet::new();
+                warnings
+                    .into_iter()
+                    .flatten()
+                    .filter(|w| seen.insert(w.clone()))
+                    .collect()
+            },
             outputs,
         });
     }

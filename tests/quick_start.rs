@@ -19,14 +19,7 @@ fn quick_start_tracks_the_bundled_sample_within_a_centimetre() {
     let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], d);
     assert!(ok, "{err}");
     eprintln!("{out}");
-    let truth_path = d.join("data/tripod/ground_truth/joints.csv");
-    let truth = hullpose::joints::read(&truth_path).unwrap();
-    let rows = hullpose::joints::read(&d.join("output/joints.csv")).unwrap();
-    let errors: Vec<f64> = hullpose::eval::pose::joint_errors(&truth, &rows, &truth_path)
-        .unwrap()
-        .into_iter()
-        .map(|x| x.1 * 100.0)
-        .collect();
+    let errors = output_joint_errors_cm(d, "tripod");
     eprintln!("mean joint error per frame, cm: {errors:.2?}");
     assert_eq!(errors.len(), 7);
     let worst = errors.iter().copied().fold(0.0, f64::max);

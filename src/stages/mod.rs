@@ -231,6 +231,13 @@ fn resolve_method(ctx: &Context) -> Result<SilhouetteMethod> {
             seq.dir.join("masks"),
             "silhouette.method is 'masks' but the sequence has no masks/ folder",
         )),
+        SilhouetteMethod::Background | SilhouetteMethod::Constant if !seq.has_frames => {
+            Err(Error::invalid(
+                seq.dir.join("frames"),
+                "a masks-only capture (no frames/) takes its silhouettes from masks/; \
+                 set silhouette.method to 'masks' or 'auto'",
+            ))
+        }
         SilhouetteMethod::Background if !seq.has_backgrounds => Err(Error::invalid(
             seq.dir.join("background"),
             "background subtraction needs a plate background/<camera>.png for every camera \
@@ -375,10 +382,76 @@ pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImag
 
 fn graphcut_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result<()> {
     key.add_file(&ctx.config.calibration)?;
+    if !ctx.sequence.has_frames {
+        key.add("frames", "none (masks only)");
+        return Ok(());
+    }
     for c in 0..ctx.sequence.cameras.len() {
         key.add_file(&ctx.sequence.frame_path(c, frame))?;
     }
     Ok(())
+}
+
+/// What the graph cut does on a masks-only capture.
+pub const MASKS_ONLY_GRAPHCUT: &str =
+    "the capture has masks and no frames/, so there is no photo-consistency: the hull passes \
+     through as the observed surface";
+
+/// What the reliability stage does on a masks-only capture.
+pub const MASKS_ONLY_RELIABILITY: &str =
+    "the capture has masks and no frames/: rho_p is 1 on every vertex, so the fit weighs \
+     contacts only (the rho_c method)";
+
+/// What each stage will do on this capture and why, one line per stage (`pipeline check`).
+pub fn plan_notes(ctx: &Context) -> Result<Vec<String>> {
+    let seq = ctx.sequence;
+    let silhouette = match resolve_method(ctx)? {
+        SilhouetteMethod::Masks if ctx.config.silhouette.clean_given => {
+            "the given masks (masks/), cleaned (silhouette.clean_given)"
+        }
+        SilhouetteMethod::Masks => "the given masks (masks/)",
+        SilhouetteMethod::Constant => "subtraction of one constant background colour",
+        _ => "background subtraction against the plates (background/)",
+    };
+    let photo = seq.has_frames;
+    let skeleton = seq.skeleton()?.is_some();
+    let fit = if skeleton {
+        "from skeleton.yaml at the reference frame"
+    } else {
+        "skipped: no skeleton.yaml"
+    };
+    Ok(vec![
+        format!("silhouette: {silhouette}"),
+        format!(
+            "visual_hull: voxel carving at {} m",
+            ctx.config.visual_hull.voxel_size
+        ),
+        format!(
+            "graphcut: {}",
+            if photo {
+                "refines the hull by multi-view photo-consistency"
+            } else {
+                MASKS_ONLY_GRAPHCUT
+            }
+        ),
+        format!(
+            "reliability: {}",
+            if photo {
+                "ZNCC and rho_p of every surface vertex"
+            } else {
+                MASKS_ONLY_RELIABILITY
+            }
+        ),
+        format!("model, fit: {fit}"),
+        format!(
+            "export: {}",
+            if skeleton {
+                "meshes, motion (glb, bvh) and overlays"
+            } else {
+                "meshes only (no motion without a skeleton)"
+            }
+        ),
+    ])
 }
 
 /// Reads a reconstruction stage's cached grid of a frame from its header only (no signed
@@ -441,6 +514,9 @@ fn reliability_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let observed = if mesh.vertices.is_empty() {
         warnings.push(format!("frame {frame}: the refined surface is empty"));
         reliability::Observed::default()
+    } else if !ctx.sequence.has_frames {
+        warnings.push(format!("reliability: {MASKS_ONLY_RELIABILITY}"));
+        reliability::Observed::unweighted(&mesh)
     } else {
         let images = grey_frames(ctx, frame)?;
         reliability::observe(&ctx.sequence.cameras, &images, &mesh, grid.voxel, p)
@@ -484,6 +560,14 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         let warning = format!("frame {frame}: the hull is empty");
         let grid_data = visual_hull::grid_bytes(&grid, &sdf);
         return write_reconstruction(&dir, frame, &TriMesh::default(), &grid_data, vec![warning]);
+    }
+    if !ctx.sequence.has_frames {
+        // Nothing to refine with: the hull passes through unchanged.
+        let hull_dir = ctx.cache.stage_dir("visual_hull");
+        let mesh = crate::geometry::ply::read_ply(&hull_dir.join(&ply))?;
+        let grid_data = visual_hull::grid_bytes(&grid, &sdf);
+        let note = vec![format!("graphcut: {MASKS_ONLY_GRAPHCUT}")];
+        return write_reconstruction(&dir, frame, &mesh, &grid_data, note);
     }
     let hull = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
     let cams = &ctx.sequence.cameras;

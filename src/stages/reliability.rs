@@ -51,9 +51,8 @@ pub struct ReliabilityParams {
     pub image_sigma: f64,
     /// Largest shift along the normal searched for the best ZNCC, voxels. Default 1.0: the
     /// refined surface is only known to about a voxel, and a patch a voxel off its true
-    /// depth is misaligned between views; the search climbs in quarter-voxel steps from the
-    /// vertex towards the better neighbour while the mean improves, up to this, and keeps
-    /// the best. 0 scores the vertex exactly where it lies.
+    /// depth is misaligned between views; the search tests shifts of a quarter voxel up to
+    /// this and keeps the best mean. 0 scores the vertex exactly where it lies.
     pub normal_search: f64,
     /// Slope alpha_p of rho_p (paper eq. 3). Default 5.0.
     pub alpha_p: f64,
@@ -181,6 +180,19 @@ impl Observed {
         Ok(o)
     }
 
+    /// `mesh` as an observed surface without photo-consistency (a masks-only capture):
+    /// rho_p 1 on every vertex, ZNCC 0 and no camera counted.
+    pub fn unweighted(mesh: &TriMesh) -> Observed {
+        let n = mesh.vertices.len();
+        Observed {
+            vertices: mesh.vertices.iter().map(|v| v.cast()).collect(),
+            normals: mesh.vertex_normals().iter().map(|v| v.cast()).collect(),
+            zncc: vec![0.0; n],
+            rho_p: vec![1.0; n],
+            cameras: vec![0; n],
+        }
+    }
+
     /// The colour of every vertex as in the paper's figure: blue where consistent, red where
     /// not (by rho_p relative to its value at ZNCC = 1), grey where fewer than two cameras
     /// see it.
@@ -266,28 +278,18 @@ pub fn vertex_zncc(
                     }
                     sum / (k * (k - 1) / 2) as f32
                 };
-                // Hill climbing in quarter-voxel steps from the vertex: on an accurate
-                // surface the best shift is at or next to 0 (three evaluations); otherwise
-                // the search walks uphill as far as `normal_search`.
-                let mut best = score(0);
-                if steps == 0 {
-                    return (best.clamp(-1.0, 1.0), k as u8);
-                }
-                let (below, above) = (score(-1), score(1));
-                let (mut at, step): (i64, i64) = if above > best && above >= below {
-                    (1, 1)
-                } else if below > best {
-                    (-1, -1)
-                } else {
-                    (0, 0)
-                };
-                best = best.max(below).max(above);
-                while step != 0 && (at + step).abs() <= steps {
-                    let z = score(at + step);
-                    if z <= best {
-                        break;
+                // Coarse to fine: half-voxel steps, then the quarter steps around the best.
+                let (mut best, mut at) = (f32::NEG_INFINITY, 0);
+                for s in (-steps..=steps).filter(|s| s % 2 == 0) {
+                    let z = score(s);
+                    if z > best {
+                        (best, at) = (z, s);
                     }
-                    (best, at) = (z, at + step);
+                }
+                for s in [at - 1, at + 1] {
+                    if s.abs() <= steps {
+                        best = best.max(score(s));
+                    }
                 }
                 (best.clamp(-1.0, 1.0), k as u8)
             },

@@ -379,3 +379,16 @@ pub fn joint_rows_of(
         .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(skeleton, *f, &r.pose))
         .collect()
 }
+
+/// Mean joint error per frame, centimetres, of the run's `output/joints.csv` in `dir`
+/// against the sequence `seq`'s ground truth.
+pub fn output_joint_errors_cm(dir: &Path, seq: &str) -> Vec<f64> {
+    let truth_path = dir.join(format!("data/{seq}/ground_truth/joints.csv"));
+    let truth = hullpose::joints::read(&truth_path).unwrap();
+    let rows = hullpose::joints::read(&dir.join("output/joints.csv")).unwrap();
+    hullpose::eval::pose::joint_errors(&truth, &rows, &truth_path)
+        .unwrap()
+        .into_iter()
+        .map(|x| x.1 * 100.0)
+        .collect()
+}
