@@ -418,6 +418,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Evaluate { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
             evaluate_pose(&job)?;
+            evaluate_health(&job)?;
             if !job
                 .frames
                 .iter()
@@ -637,6 +638,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// The health part of `evaluate`: fit.csv's silhouette IoU and joint motion per frame, a
+/// table and a plot, with or without ground truth.
+fn evaluate_health(job: &Job) -> anyhow::Result<()> {
+    let rows: Vec<_> = hullpose::eval::health::read(&job.config.output)?
+        .into_iter()
+        .filter(|r| job.frames.contains(&r.frame))
+        .collect();
+    if rows.is_empty() {
+        return Ok(());
+    }
+    println!("fit health: the posed model's silhouette IoU per camera, and joint motion");
+    print!("{}", hullpose::eval::health::table(&rows));
+    let dir = job.config.output.join("evaluation");
+    let path = hullpose::eval::health::write_plot(&dir, &rows)?;
+    println!("written to {}\n", path.display());
     Ok(())
 }
 

@@ -44,4 +44,5 @@ fn proposed_fit_tracks_the_humanoid_within_one_and_a_half_centimetres() {
     assert_eq!(proposed.len(), 24);
     let worst = proposed.iter().copied().fold(0.0, f64::max);
     assert!(worst <= 1.5, "proposed worst {worst:.2} cm: {proposed:.2?}");
+    assert_fit_health(d);
 }

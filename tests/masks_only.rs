@@ -52,6 +52,7 @@ fn a_masks_only_humanoid_is_tracked_within_two_and_a_half_centimetres() {
     eprintln!("masks only, joint error per frame (cm): {errors:.2?}");
     assert_eq!(errors.len(), 16);
     assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
+    assert_fit_health(d);
     // The exports draw on the masks in place of frames.
     assert!(d
         .join("output/export/overlays/contact/000005.png")

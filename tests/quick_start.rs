@@ -24,4 +24,5 @@ fn quick_start_tracks_the_bundled_sample_within_a_centimetre() {
     assert_eq!(errors.len(), 7);
     let worst = errors.iter().copied().fold(0.0, f64::max);
     assert!(worst <= 1.0, "worst frame {worst:.2} cm: {errors:.2?}");
+    assert_fit_health(d);
 }

@@ -21,6 +21,7 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 
+pub mod health;
 pub mod pose;
 pub mod reliability;
 

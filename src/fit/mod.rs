@@ -18,6 +18,7 @@
 mod anderson;
 pub mod contact;
 mod descent;
+pub mod health;
 pub mod kept_nearest;
 mod moments;
 pub mod pairs;

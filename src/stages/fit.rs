@@ -22,6 +22,11 @@ use std::path::Path;
 pub const DIAGNOSTICS_HEADER: &str =
     "frame,status,iterations,lm_steps,energy,rms_m,downweighted_share,contact_share,observed,score";
 
+/// The health columns that follow the diagnostics in the stage's CSVs
+/// ([`crate::fit::health`]): the worst camera's silhouette IoU, that camera's name, the
+/// median IoU over the cameras, and the largest joint motion since the previous frame.
+pub const HEALTH_HEADER: &str = "iou_worst,iou_worst_camera,iou_median,joint_motion_m";
+
 /// The per-frame file names: (pose, joints, diagnostics, mesh).
 pub fn files(frame: u32) -> [String; 4] {
     let s = frame_stem(frame);
@@ -229,12 +234,17 @@ fn write_frame(ctx: &Context, model: &BodyModel, frame: u32, result: &FitResult)
         &dir.join(&names[1]),
         &joint_rows(skeleton, frame, &result.pose),
     )?;
+    let mesh = model.pose(&result.pose);
+    let health = frame_health(ctx, model, frame, &result.pose, &mesh)?;
+    let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
     let diag = format!(
-        "{DIAGNOSTICS_HEADER}\n{}\n",
-        diagnostics_row(frame, &result.diagnostics)
+        "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4}\n",
+        diagnostics_row(frame, &result.diagnostics),
+        health.iou_worst,
+        health.iou_median,
+        health.joint_motion,
     );
     crate::fsutil::write_atomic(&dir.join(&names[2]), diag.as_bytes())?;
-    let mesh = model.pose(&result.pose);
     let colours: Vec<[u8; 3]> = model
         .labels
         .iter()
@@ -264,6 +274,29 @@ fn write_frame(ctx: &Context, model: &BodyModel, frame: u32, result: &FitResult)
     })
 }
 
+/// A fitted frame's health: the posed model (`mesh`) against the frame's silhouettes, and
+/// its joints' motion from the previous tracked frame's cached pose.
+fn frame_health(
+    ctx: &Context,
+    model: &BodyModel,
+    frame: u32,
+    pose: &Pose,
+    mesh: &crate::geometry::TriMesh,
+) -> Result<crate::fit::health::Health> {
+    use crate::fit::health;
+    let masks = super::load_silhouettes(ctx, frame)?;
+    let iou = health::silhouette_iou(&ctx.sequence.cameras, &masks, mesh);
+    let t0 = model.skeleton.reference_frame;
+    let motion = match ctx.sequence.tracked_previous(frame, t0) {
+        Some(previous) => {
+            let before = cached_pose(ctx, &model.skeleton, previous)?;
+            crate::fit::joint_motion(model, &before, pose)
+        }
+        None => 0.0,
+    };
+    Ok(health::summarize(&iou, motion))
+}
+
 /// Concatenates the frames' artifacts into the output folder: joints.csv, poses.csv and
 /// fit.csv, in frame order.
 pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
@@ -273,7 +306,7 @@ pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
     let out = &ctx.config.output;
     let mut joints = String::new();
     let mut poses = String::new();
-    let mut diag = format!("{DIAGNOSTICS_HEADER}\n");
+    let mut diag = format!("{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n");
     for &f in &frames {
         let names = files(f);
         let body = |name: &str| -> Result<String> {
@@ -308,7 +341,9 @@ pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
 /// Parses a diagnostics CSV (the per-frame file or fit.csv): (frame, diagnostics) per row.
 pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitDiagnostics)>> {
     let mut lines = text.lines();
-    if lines.next() != Some(DIAGNOSTICS_HEADER) {
+    let with_health = format!("{DIAGNOSTICS_HEADER},{HEALTH_HEADER}");
+    let header = lines.next();
+    if header != Some(DIAGNOSTICS_HEADER) && header != Some(with_health.as_str()) {
         return Err(Error::invalid(
             path,
             format!(
@@ -329,7 +364,8 @@ pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitDiagnos
             )
         };
         let parts: Vec<&str> = line.split(',').collect();
-        let [frame, status, iterations, lm_steps, energy, rms, downweighted, contact, observed, score] =
+        // The health columns, when present, are read by [`parse_health`].
+        let [frame, status, iterations, lm_steps, energy, rms, downweighted, contact, observed, score, ..] =
             parts[..]
         else {
             return Err(bad());
@@ -356,4 +392,46 @@ pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitDiagnos
         out.push((frame, diagnostics));
     }
     Ok(out)
+}
+
+/// One frame's health as fit.csv records it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HealthRow {
+    pub frame: u32,
+    pub status: String,
+    pub iterations: usize,
+    pub iou_worst: f64,
+    pub iou_worst_camera: String,
+    pub iou_median: f64,
+    pub joint_motion: f64,
+}
+
+/// The health rows of a fit.csv (`path` names it in errors); empty when it predates the
+/// health columns.
+pub fn parse_health(path: &Path, text: &str) -> Result<Vec<HealthRow>> {
+    let mut lines = text.lines();
+    if lines.next() != Some(format!("{DIAGNOSTICS_HEADER},{HEALTH_HEADER}").as_str()) {
+        return Ok(Vec::new());
+    }
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            let bad = || Error::invalid(path, format!("line {}: not a fit.csv row", i + 2));
+            let parts: Vec<&str> = line.split(',').collect();
+            let [frame, status, iterations, .., iou_worst, camera, iou_median, motion] = parts[..]
+            else {
+                return Err(bad());
+            };
+            let real = |x: &str| x.parse::<f64>().map_err(|_| bad());
+            Ok(HealthRow {
+                frame: frame.parse().map_err(|_| bad())?,
+                status: status.to_string(),
+                iterations: iterations.parse().map_err(|_| bad())?,
+                iou_worst: real(iou_worst)?,
+                iou_worst_camera: camera.to_string(),
+                iou_median: real(iou_median)?,
+                joint_motion: real(motion)?,
+            })
+        })
+        .collect()
 }

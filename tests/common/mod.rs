@@ -392,3 +392,28 @@ pub fn output_joint_errors_cm(dir: &Path, seq: &str) -> Vec<f64> {
         .map(|x| x.1 * 100.0)
         .collect()
 }
+
+/// The fit's health in the run's `output/fit.csv` in `dir`: every frame has it, and the
+/// posed model's worst-camera silhouette IoU never falls below 0.9 times its value at the
+/// reference frame (issue bound: no drift, no lost limb).
+pub fn assert_fit_health(dir: &Path) {
+    let rows = hullpose::eval::health::read(&dir.join("output")).unwrap();
+    assert!(!rows.is_empty(), "fit.csv has the health columns");
+    let reference = rows.iter().find(|r| r.status == "reference").unwrap();
+    assert!(
+        reference.iou_worst > 0.8,
+        "reference IoU {}",
+        reference.iou_worst
+    );
+    for r in &rows {
+        assert!(
+            r.iou_worst >= 0.9 * reference.iou_worst,
+            "frame {}: worst IoU {} ({}) against {} at the reference",
+            r.frame,
+            r.iou_worst,
+            r.iou_worst_camera,
+            reference.iou_worst
+        );
+        assert!(r.iou_median >= r.iou_worst && r.joint_motion.is_finite());
+    }
+}

@@ -1,0 +1,138 @@
+//! The fit's health per frame, with or without ground truth: how well the posed model
+//! explains every camera's silhouette, and how far the skeleton moved since the previous
+//! frame. A limb swap, a drift or a fit stuck at the round cap shows here first.
+//!
+//! The silhouette agreement is the intersection over union of the posed model's projection
+//! (its depth map, rasterized at a reduced resolution) with the silhouette sampled at the
+//! same pixels, per camera; the row keeps the worst camera, the median over cameras and the
+//! worst camera's name.
+
+use crate::camera::Camera;
+use crate::geometry::TriMesh;
+use image::GrayImage;
+use rayon::prelude::*;
+
+/// Width of the reduced images the agreement is measured on, pixels (at most).
+const HEALTH_WIDTH: u32 = 256;
+
+/// One frame's health figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Health {
+    /// The lowest silhouette IoU over the cameras, [0, 1].
+    pub iou_worst: f64,
+    /// Which camera it is (its index in the calibration).
+    pub iou_worst_camera: usize,
+    /// The median silhouette IoU over the cameras.
+    pub iou_median: f64,
+    /// The largest motion of any joint since the previous tracked frame, metres (0 at the
+    /// reference frame).
+    pub joint_motion: f64,
+}
+
+/// The silhouette IoU of `mesh` (the posed model) in every camera against `masks`.
+pub fn silhouette_iou(cams: &[Camera], masks: &[GrayImage], mesh: &TriMesh) -> Vec<f64> {
+    cams.par_iter()
+        .zip(masks)
+        .map(|(cam, mask)| {
+            let factor = (HEALTH_WIDTH as f64 / cam.width as f64).min(1.0);
+            let small = cam.scaled(factor);
+            let depth = crate::geometry::raster::depth_map(&small, &mesh.vertices, &mesh.triangles);
+            let (w, h) = (small.width as usize, small.height as usize);
+            let (mut both, mut either) = (0usize, 0usize);
+            for y in 0..h {
+                // The full-resolution pixel under this one's centre.
+                let my = (((y as f64 + 0.5) / factor) as u32).min(mask.height() - 1);
+                for x in 0..w {
+                    let mx = (((x as f64 + 0.5) / factor) as u32).min(mask.width() - 1);
+                    let model = depth[y * w + x].is_finite();
+                    let seen = mask.get_pixel(mx, my).0[0] >= 128;
+                    both += (model && seen) as usize;
+                    either += (model || seen) as usize;
+                }
+            }
+            if either == 0 {
+                1.0 // neither shows anything: they agree
+            } else {
+                both as f64 / either as f64
+            }
+        })
+        .collect()
+}
+
+/// The health of a frame from its per-camera IoUs and its joint motion.
+pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
+    let (iou_worst_camera, iou_worst) = iou
+        .iter()
+        .copied()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, 1.0));
+    let mut sorted = iou.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let iou_median = if sorted.is_empty() {
+        1.0
+    } else if sorted.len() % 2 == 1 {
+        sorted[sorted.len() / 2]
+    } else {
+        (sorted[sorted.len() / 2 - 1] + sorted[sorted.len() / 2]) / 2.0
+    };
+    Health {
+        iou_worst,
+        iou_worst_camera,
+        iou_median,
+        joint_motion,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    /// A cube seen by a camera agrees with its own silhouette, and not with a shifted one.
+    #[test]
+    fn iou_of_a_cube_with_its_own_and_a_shifted_silhouette() {
+        let cam = Camera::look_at(
+            "c",
+            640,
+            480,
+            600.0,
+            Vector3::new(0.0, -3.0, 0.0),
+            Vector3::zeros(),
+            Vector3::z(),
+        );
+        // A 0.5 m cube, meshed as the pipeline meshes (outward, counter-clockwise).
+        let grid = crate::geometry::grid::GridSpec {
+            origin: Vector3::repeat(-0.4),
+            voxel: 0.02,
+            dims: [41, 41, 41],
+        };
+        let sdf: Vec<f32> = (0..grid.len())
+            .map(|i| {
+                let [x, y, z] = grid.coords(i);
+                let c = grid.centre(x, y, z);
+                (c.x.abs().max(c.y.abs()).max(c.z.abs()) - 0.25) as f32
+            })
+            .collect();
+        let cube = crate::stages::visual_hull::mesh_sdf(&grid, &sdf);
+        let silhouette = |dx: f64| {
+            GrayImage::from_fn(640, 480, |x, y| {
+                let p = nalgebra::Vector2::new(x as f64, y as f64);
+                let (ray_origin, dir) = cam.ray(p);
+                let hit = (0..200).any(|k| {
+                    let q = ray_origin + dir * (2.0 + k as f64 * 0.01) - Vector3::x() * dx;
+                    q.iter().all(|v| v.abs() <= 0.25)
+                });
+                image::Luma([if hit { 255 } else { 0 }])
+            })
+        };
+        let own = silhouette_iou(std::slice::from_ref(&cam), &[silhouette(0.0)], &cube);
+        assert!(own[0] > 0.95, "{own:?}");
+        let shifted = silhouette_iou(std::slice::from_ref(&cam), &[silhouette(0.25)], &cube);
+        // Shifted by half its width: overlap 1/2 of a width, union 3/2.
+        assert!((shifted[0] - 1.0 / 3.0).abs() < 0.05, "{shifted:?}");
+        let h = summarize(&[0.9, 0.5, 0.8, 0.95], 0.02);
+        assert_eq!((h.iou_worst, h.iou_worst_camera), (0.5, 1));
+        assert!((h.iou_median - 0.85).abs() < 1e-12);
+    }
+}
