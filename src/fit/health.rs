@@ -29,6 +29,51 @@ pub struct Health {
     pub joint_motion: f64,
 }
 
+/// The body model's mesh coarsened for the silhouette check (vertex clustering on a grid of
+/// `cell` metres at the rest pose: one vertex per occupied cell, triangles whose corners
+/// fall in three different cells): a sixth of the triangles at 2 cm, and a projection that
+/// differs from the full mesh's by under a cell at its outline.
+pub struct CoarseModel {
+    /// The model vertex standing for each cell.
+    keep: Vec<usize>,
+    /// Triangles over `keep`'s indices.
+    triangles: Vec<[u32; 3]>,
+}
+
+impl CoarseModel {
+    pub fn new(rest: &TriMesh, cell: f64) -> CoarseModel {
+        let mut cells: std::collections::HashMap<[i64; 3], u32> = Default::default();
+        let mut keep = Vec::new();
+        let cluster: Vec<u32> = rest
+            .vertices
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let key = [v.x, v.y, v.z].map(|c| (c / cell).floor() as i64);
+                *cells.entry(key).or_insert_with(|| {
+                    keep.push(i);
+                    (keep.len() - 1) as u32
+                })
+            })
+            .collect();
+        let triangles = rest
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| cluster[i as usize]))
+            .filter(|[a, b, c]| a != b && b != c && a != c)
+            .collect();
+        CoarseModel { keep, triangles }
+    }
+
+    /// The coarse mesh at the pose of `posed` (the full model mesh posed).
+    pub fn posed(&self, posed: &TriMesh) -> TriMesh {
+        TriMesh {
+            vertices: self.keep.iter().map(|&i| posed.vertices[i]).collect(),
+            triangles: self.triangles.clone(),
+        }
+    }
+}
+
 /// The silhouette IoU of `mesh` (the posed model) in every camera against `masks`.
 pub fn silhouette_iou(cams: &[Camera], masks: &[GrayImage], mesh: &TriMesh) -> Vec<f64> {
     cams.par_iter()
@@ -128,6 +173,10 @@ mod tests {
         };
         let own = silhouette_iou(std::slice::from_ref(&cam), &[silhouette(0.0)], &cube);
         assert!(own[0] > 0.95, "{own:?}");
+        let coarse = CoarseModel::new(&cube, 0.06).posed(&cube);
+        assert!(coarse.triangles.len() * 4 < cube.triangles.len());
+        let own_coarse = silhouette_iou(std::slice::from_ref(&cam), &[silhouette(0.0)], &coarse);
+        assert!(own_coarse[0] > 0.9, "{own_coarse:?}");
         let shifted = silhouette_iou(std::slice::from_ref(&cam), &[silhouette(0.25)], &cube);
         // Shifted by half its width: overlap 1/2 of a width, union 3/2.
         assert!((shifted[0] - 1.0 / 3.0).abs() < 0.05, "{shifted:?}");

@@ -204,6 +204,7 @@ pub(super) fn compute(
 ) -> Result<()> {
     let model = super::model::load(ctx)?;
     let probe = Probe::default();
+    let coarse = crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL);
     track(
         ctx,
         &model,
@@ -213,14 +214,23 @@ pub(super) fn compute(
         &mut |frame, result, secs| {
             // The run keeps no round log: dropped frame by frame, so it never grows.
             probe.take_rounds();
-            let out = write_frame(ctx, &model, frame, result)?;
+            let out = write_frame(ctx, &model, &coarse, frame, result)?;
             commit(frame, out, secs)
         },
     )
 }
 
 /// Writes a frame's artifacts.
-fn write_frame(ctx: &Context, model: &BodyModel, frame: u32, result: &FitResult) -> Result<Output> {
+/// Cell of the coarse model the fit's health is measured with, metres.
+const HEALTH_CELL: f64 = 0.02;
+
+fn write_frame(
+    ctx: &Context,
+    model: &BodyModel,
+    coarse: &crate::fit::health::CoarseModel,
+    frame: u32,
+    result: &FitResult,
+) -> Result<Output> {
     use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let dir = ctx.cache.stage_dir("fit");
     let names = files(frame);
@@ -235,7 +245,7 @@ fn write_frame(ctx: &Context, model: &BodyModel, frame: u32, result: &FitResult)
         &joint_rows(skeleton, frame, &result.pose),
     )?;
     let mesh = model.pose(&result.pose);
-    let health = frame_health(ctx, model, frame, &result.pose, &mesh)?;
+    let health = frame_health(ctx, model, frame, &result.pose, &coarse.posed(&mesh))?;
     let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
     let diag = format!(
         "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4}\n",
@@ -274,7 +284,7 @@ fn write_frame(ctx: &Context, model: &BodyModel, frame: u32, result: &FitResult)
     })
 }
 
-/// A fitted frame's health: the posed model (`mesh`) against the frame's silhouettes, and
+/// A fitted frame's health: the posed model (`mesh`, coarse) against the frame's silhouettes, and
 /// its joints' motion from the previous tracked frame's cached pose.
 fn frame_health(
     ctx: &Context,
