@@ -19,20 +19,21 @@ pub fn read(output: &Path) -> Result<Vec<HealthRow>> {
 /// A printed table of health rows.
 pub fn table(rows: &[HealthRow]) -> String {
     let mut s = format!(
-        "{:>6}  {:>13}  {:>6}  {:>9}  {:>10}  {:>10}  {:>13}\n",
+        "{:>6}  {:>13}  {:>6}  {:>9}  {:>10}  {:>10}  {:>13}  flags\n",
         "frame", "status", "rounds", "IoU worst", "(camera)", "IoU median", "joint motion"
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{:>6}  {:>13}  {:>6}  {:>9.3}  {:>10}  {:>10.3}  {:>10.1} cm",
+            "{:>6}  {:>13}  {:>6}  {:>9.3}  {:>10}  {:>10.3}  {:>10.1} cm  {}",
             r.frame,
             r.status,
             r.iterations,
             r.iou_worst,
             r.iou_worst_camera,
             r.iou_median,
-            100.0 * r.joint_motion
+            100.0 * r.joint_motion,
+            r.flags
         );
     }
     s

@@ -129,6 +129,30 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
     }
 }
 
+/// How many previous frames make a frame's recent silhouette level.
+const RECENT_FRAMES: usize = 5;
+
+/// Why a frame is implausible (empty when it is not): `fast_joint` when a joint moved
+/// faster than `p.max_joint_speed` at `frame_rate`, `iou_drop` when the worst IoU fell below
+/// `p.iou_drop` times the median of `recent` (the previous frames' worst IoU, oldest first;
+/// only its last [`RECENT_FRAMES`] count).
+pub fn flags(
+    h: &Health,
+    recent: &[f64],
+    p: &super::params::HealthParams,
+    frame_rate: f64,
+) -> Vec<&'static str> {
+    let mut out = Vec::new();
+    if h.joint_motion * frame_rate > p.max_joint_speed {
+        out.push("fast_joint");
+    }
+    let last = &recent[recent.len().saturating_sub(RECENT_FRAMES)..];
+    if !last.is_empty() && h.iou_worst < p.iou_drop * summarize(last, 0.0).iou_median {
+        out.push("iou_drop");
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,6 +204,12 @@ mod tests {
         let shifted = silhouette_iou(std::slice::from_ref(&cam), &[silhouette(0.25)], &cube);
         // Shifted by half its width: overlap 1/2 of a width, union 3/2.
         assert!((shifted[0] - 1.0 / 3.0).abs() < 0.05, "{shifted:?}");
+        let p = crate::fit::params::HealthParams::default();
+        let good = summarize(&[0.95, 0.96], 0.1);
+        assert!(flags(&good, &[0.96, 0.95, 0.97], &p, 25.0).is_empty());
+        let lost = summarize(&[0.7, 0.96], 0.3);
+        assert_eq!(flags(&lost, &[0.96], &p, 25.0), ["fast_joint", "iou_drop"]);
+        assert!(flags(&lost, &[], &p, 10.0).is_empty());
         let h = summarize(&[0.9, 0.5, 0.8, 0.95], 0.02);
         assert_eq!((h.iou_worst, h.iou_worst_camera), (0.5, 1));
         assert!((h.iou_median - 0.85).abs() < 1e-12);

@@ -92,6 +92,8 @@ pub struct FitParams {
     pub min_observed_share: f64,
     /// Fits again from other starts when a fit looks lost ([`RestartParams`]).
     pub restart: RestartParams,
+    /// When a fitted frame counts as implausible ([`crate::fit::health`]).
+    pub health: HealthParams,
 }
 
 /// When a frame's rounds stop (pipeline.yaml key `fit.stop`).
@@ -140,6 +142,30 @@ pub struct RestartParams {
     pub rounds_factor: usize,
 }
 
+/// The fit's health checks (pipeline.yaml key `fit.health`): a frame is flagged in fit.csv
+/// and the run summary when one of them fails.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HealthParams {
+    /// The fastest plausible motion of a joint, metres per second, at the capture's frame
+    /// rate (`export.frame_rate`). Default 6: a sprinter's hand; at 25 frames per second, 24
+    /// cm between frames.
+    pub max_joint_speed: f64,
+    /// A frame is flagged when its worst-camera silhouette IoU falls below this share of
+    /// the recent level (the median of the previous five tracked frames' worst IoU).
+    /// Default 0.9.
+    pub iou_drop: f64,
+}
+
+impl Default for HealthParams {
+    fn default() -> Self {
+        HealthParams {
+            max_joint_speed: 6.0,
+            iou_drop: 0.9,
+        }
+    }
+}
+
 impl Default for RestartParams {
     fn default() -> Self {
         RestartParams {
@@ -163,6 +189,7 @@ impl Default for FitParams {
             stop: StopParams::default(),
             min_observed_share: 0.05,
             restart: RestartParams::default(),
+            health: HealthParams::default(),
         }
     }
 }
@@ -219,6 +246,14 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
                 "fit.stop.{key} must be a positive distance in metres, got {tolerance}"
             ));
         }
+    }
+    let h = &p.health;
+    if !(positive(h.max_joint_speed) && h.iou_drop > 0.0 && h.iou_drop <= 1.0) {
+        return Err(format!(
+            "fit.health: max_joint_speed must be a positive number of metres per second and \
+             iou_drop a share in (0, 1], got {} and {}",
+            h.max_joint_speed, h.iou_drop
+        ));
     }
     let r = &p.restart;
     if !(r.energy_ratio.is_finite() && r.energy_ratio >= 1.0) {

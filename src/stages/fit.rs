@@ -24,8 +24,9 @@ pub const DIAGNOSTICS_HEADER: &str =
 
 /// The health columns that follow the diagnostics in the stage's CSVs
 /// ([`crate::fit::health`]): the worst camera's silhouette IoU, that camera's name, the
-/// median IoU over the cameras, and the largest joint motion since the previous frame.
-pub const HEALTH_HEADER: &str = "iou_worst,iou_worst_camera,iou_median,joint_motion_m";
+/// median IoU over the cameras, the largest joint motion since the previous frame, and the
+/// health checks that failed (`fast_joint`, `iou_drop`, joined by `+`; empty when none).
+pub const HEALTH_HEADER: &str = "iou_worst,iou_worst_camera,iou_median,joint_motion_m,flags";
 
 /// The per-frame file names: (pose, joints, diagnostics, mesh).
 pub fn files(frame: u32) -> [String; 4] {
@@ -205,6 +206,8 @@ pub(super) fn compute(
     let model = super::model::load(ctx)?;
     let probe = Probe::default();
     let coarse = crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL);
+    // The worst silhouette IoU of the frames fitted so far, in tracking order.
+    let mut recent: Vec<f64> = Vec::new();
     track(
         ctx,
         &model,
@@ -214,7 +217,7 @@ pub(super) fn compute(
         &mut |frame, result, secs| {
             // The run keeps no round log: dropped frame by frame, so it never grows.
             probe.take_rounds();
-            let out = write_frame(ctx, &model, &coarse, frame, result)?;
+            let out = write_frame(ctx, &model, &coarse, &mut recent, frame, result)?;
             commit(frame, out, secs)
         },
     )
@@ -228,6 +231,7 @@ fn write_frame(
     ctx: &Context,
     model: &BodyModel,
     coarse: &crate::fit::health::CoarseModel,
+    recent: &mut Vec<f64>,
     frame: u32,
     result: &FitResult,
 ) -> Result<Output> {
@@ -247,12 +251,16 @@ fn write_frame(
     let mesh = model.pose(&result.pose);
     let health = frame_health(ctx, model, frame, &result.pose, &coarse.posed(&mesh))?;
     let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
+    let p = &ctx.config.fit.health;
+    let flags = crate::fit::health::flags(&health, recent, p, ctx.config.export.frame_rate);
+    recent.push(health.iou_worst);
     let diag = format!(
-        "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4}\n",
+        "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{}\n",
         diagnostics_row(frame, &result.diagnostics),
         health.iou_worst,
         health.iou_median,
         health.joint_motion,
+        flags.join("+"),
     );
     crate::fsutil::write_atomic(&dir.join(&names[2]), diag.as_bytes())?;
     let colours: Vec<[u8; 3]> = model
@@ -272,6 +280,15 @@ fn write_frame(
         PlyFormat::BinaryLittleEndian,
     )?;
     let mut warnings = Vec::new();
+    if !flags.is_empty() {
+        warnings.push(format!(
+            "fit: frame {frame} looks implausible ({}): worst silhouette IoU {:.3} ({worst_camera}), \
+             a joint moved {:.1} cm; see `pipeline evaluate` and README \"Reading the fit's health\"",
+            flags.join(", "),
+            health.iou_worst,
+            100.0 * health.joint_motion
+        ));
+    }
     if result.diagnostics.status == FitStatus::NoObservation {
         warnings.push(format!(
             "fit: frame {frame} has too little observed surface ({} vertices); it keeps the previous pose",
@@ -414,6 +431,8 @@ pub struct HealthRow {
     pub iou_worst_camera: String,
     pub iou_median: f64,
     pub joint_motion: f64,
+    /// The failed health checks, `+`-joined (empty: none).
+    pub flags: String,
 }
 
 /// The health rows of a fit.csv (`path` names it in errors); empty when it predates the
@@ -428,7 +447,8 @@ pub fn parse_health(path: &Path, text: &str) -> Result<Vec<HealthRow>> {
         .map(|(i, line)| {
             let bad = || Error::invalid(path, format!("line {}: not a fit.csv row", i + 2));
             let parts: Vec<&str> = line.split(',').collect();
-            let [frame, status, iterations, .., iou_worst, camera, iou_median, motion] = parts[..]
+            let [frame, status, iterations, .., iou_worst, camera, iou_median, motion, flags] =
+                parts[..]
             else {
                 return Err(bad());
             };
@@ -441,6 +461,7 @@ pub fn parse_health(path: &Path, text: &str) -> Result<Vec<HealthRow>> {
                 iou_worst_camera: camera.to_string(),
                 iou_median: real(iou_median)?,
                 joint_motion: real(motion)?,
+                flags: flags.to_string(),
             })
         })
         .collect()

@@ -25,9 +25,19 @@ use scene::Scene;
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// The export settings of a synthetic capture's pipeline.yaml: its world stands on +z.
-const SYNTH_EXPORT_YAML: &str = "# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
-export:\n  up_axis: +z        # the synthetic captures stand on +z; glb and bvh turn it to +Y\n  frame_rate: 25\n";
+/// The export settings of a synthetic capture's pipeline.yaml: its world stands on +z, and
+/// its `frame_rate` frames per second make the motion last as long as its key frames at
+/// their own rate, however many frames sample it (`frames` of the scene's key frames).
+fn synth_export_yaml(frames: usize, scene: SceneKind) -> String {
+    let (key_frames, key_rate) = key_frames(scene);
+    let rate = key_rate * (frames.max(2) - 1) as f64 / (key_frames.max(2) - 1) as f64;
+    format!(
+        "# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
+         export:\n  up_axis: +z        # the synthetic captures stand on +z; glb and bvh turn it to +Y\n  \
+         frame_rate: {}        # the motion's key frames at {key_rate} per second\n",
+        (rate * 100.0).round() / 100.0
+    )
+}
 
 /// Which scene to make.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -111,6 +121,16 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
             opts.seed,
         ),
     })
+}
+
+/// The number of key frames of a scene's motion, and their rate (frames per second) at
+/// which its joints move no faster than people do: the tripod's 16 cm steps at 25, the
+/// humanoid's hand sweeps of up to 60 cm at 8.
+fn key_frames(scene: SceneKind) -> (usize, f64) {
+    match scene {
+        SceneKind::Tripod => (tripod::KEY_FRAMES, 25.0),
+        SceneKind::Humanoid => (humanoid::KEY_FRAMES, 8.0),
+    }
 }
 
 /// The skinned subject of a scene: rest mesh, weights, per-vertex labels and material.
@@ -275,8 +295,9 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     crate::fsutil::write_atomic(
         &pipeline_yaml,
         format!(
-            "{}{SYNTH_EXPORT_YAML}",
-            crate::config::default_yaml("calib/cameras.yaml", &format!("data/{}", scene.name))
+            "{}{}",
+            crate::config::default_yaml("calib/cameras.yaml", &format!("data/{}", scene.name)),
+            synth_export_yaml(nf, opts.scene)
         )
         .as_bytes(),
     )?;

@@ -415,5 +415,6 @@ pub fn assert_fit_health(dir: &Path) {
             reference.iou_worst
         );
         assert!(r.iou_median >= r.iou_worst && r.joint_motion.is_finite());
+        assert!(r.flags.is_empty(), "frame {} flagged {}", r.frame, r.flags);
     }
 }
