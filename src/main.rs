@@ -636,6 +636,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             for line in hullpose::stages::plan_notes(&job.context())? {
                 println!("  {line}");
             }
+            match hullpose::stages::model::check_skeleton(&job.context())? {
+                Some(line) => println!("skeleton: {line}"),
+                None if seq.skeleton()?.is_some() => println!(
+                    "skeleton: not tested yet against the reference frame's surface (run the \
+                     stages up to graphcut for that frame, then check again)"
+                ),
+                None => {}
+            }
         }
     }
     Ok(())

@@ -166,3 +166,49 @@ fn bench_track_output_in_a_missing_folder_fails_before_tracking() {
     );
     assert_eq!(err.trim().lines().count(), 1, "one clear error line: {err}");
 }
+
+/// `pipeline check` tests skeleton.yaml against the reference frame's cached surface before
+/// any long run: not tested before the hull exists, passed by the true skeleton, and a bone
+/// moved out of the body is refused by name.
+#[test]
+fn check_tests_the_skeleton_against_the_cached_reference_surface() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    copy_sample(d);
+    let (ok, out, err) = run_cli(&["check", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    assert!(out.contains("skeleton: not tested yet"), "{out}");
+    let (ok, _, err) = run_cli(
+        &[
+            "run",
+            "pipeline.yaml",
+            "--until",
+            "visual_hull",
+            "--frames",
+            "0..0",
+        ],
+        d,
+    );
+    assert!(ok, "{err}");
+    let (ok, out, err) = run_cli(&["check", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    assert!(out.contains("every bone lies inside"), "{out}");
+    assert!(out.contains("visual_hull/000000.ply"), "{out}");
+    // Lift the whole skeleton 0.8 m, out of the body.
+    let path = d.join("data/tripod/skeleton.yaml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut skeleton = hullpose::skeleton::Skeleton::parse(&path, &text).unwrap();
+    let away = nalgebra::Vector3::new(0.0, 0.0, 0.8);
+    for bone in &mut skeleton.bones {
+        (bone.head, bone.tail) = (bone.head + away, bone.tail + away);
+    }
+    let name = skeleton.bones[0].name.clone();
+    skeleton.write(&path).unwrap();
+    let (ok, _, err) = run_cli(&["check", "pipeline.yaml"], d);
+    assert!(!ok && !err.contains("panicked"), "{err}");
+    assert!(
+        err.contains(&format!("bone '{name}' lies outside")),
+        "{err}"
+    );
+    assert!(err.contains("skeleton.yaml"), "{err}");
+}

@@ -56,6 +56,21 @@ pub fn build(
     mesh: &TriMesh,
     p: &ModelParams,
 ) -> std::result::Result<BodyModel, String> {
+    bones_inside(skeleton, mesh)?;
+    let weights = skinning::skin_weights(skeleton, &mesh.vertices, p.blend_width);
+    let labels = skinning::labels(&weights);
+    Ok(BodyModel {
+        skeleton: skeleton.clone(),
+        mesh: mesh.clone(),
+        weights,
+        labels,
+    })
+}
+
+/// Checks that every bone of `skeleton` lies inside the closed surface `mesh` (at least
+/// two of the points at a quarter, half and three quarters of the bone inside); the message
+/// names the first bone that does not.
+pub fn bones_inside(skeleton: &Skeleton, mesh: &TriMesh) -> std::result::Result<(), String> {
     if mesh.vertices.is_empty() || mesh.triangles.is_empty() {
         return Err("the reference surface is empty".into());
     }
@@ -72,14 +87,44 @@ pub fn build(
             ));
         }
     }
-    let weights = skinning::skin_weights(skeleton, &mesh.vertices, p.blend_width);
-    let labels = skinning::labels(&weights);
-    Ok(BodyModel {
-        skeleton: skeleton.clone(),
-        mesh: mesh.clone(),
-        weights,
-        labels,
-    })
+    Ok(())
+}
+
+/// `pipeline check`'s test of skeleton.yaml against the reference frame's surface, when it
+/// is at hand (`model.mesh`, or the reference frame's refined surface or hull in the
+/// cache): a line saying which surface every bone lies inside, `None` when no surface is
+/// at hand yet, an error naming the bone otherwise.
+pub fn check_skeleton(ctx: &Context) -> Result<Option<String>> {
+    let skeleton_path = ctx.sequence.dir.join("skeleton.yaml");
+    if !skeleton_path.is_file() {
+        return Ok(None);
+    }
+    let skeleton = Skeleton::read(&skeleton_path)?;
+    let frame = skeleton.reference_frame;
+    let (ply, _) = hull_files(frame);
+    let surface = match &ctx.config.model.mesh {
+        Some(path) => Some((reference_surface(ctx, frame)?, path.clone())),
+        None => ["graphcut", "visual_hull"]
+            .iter()
+            .filter(|stage| ctx.cache.manifest(stage, frame).is_some())
+            .map(|stage| ctx.cache.stage_dir(stage).join(&ply))
+            .find(|path| path.is_file())
+            .map(|path| Ok::<_, Error>((crate::geometry::ply::read_ply(&path)?, path)))
+            .transpose()?,
+    };
+    let Some((mesh, path)) = surface else {
+        return Ok(None);
+    };
+    bones_inside(&skeleton, &mesh).map_err(|m| {
+        Error::invalid(
+            &skeleton_path,
+            format!("{m} (tested against {})", path.display()),
+        )
+    })?;
+    Ok(Some(format!(
+        "every bone lies inside the reference frame's surface ({})",
+        path.display()
+    )))
 }
 
 /// A distinct colour per part.
