@@ -22,7 +22,7 @@ make_copy() {
   cp -r "$REPO/calib" "$REPO/data" "$d/"
   sed 's/^frames: all/frames: 0..5/' "$REPO/pipeline.yaml" > "$d/pipeline.yaml"
   printf 'fit:\n  stop:\n    max_rounds: 40\n  restart:\n    enabled: false\n' >> "$d/pipeline.yaml"
-  sed -i 's/^  frame_rate: 25/  frame_rate: 25\n  formats: [bvh]/' "$d/pipeline.yaml"
+  sed -i 's/^\(  frame_rate: .*\)$/\1\n  formats: [bvh]/' "$d/pipeline.yaml"
   grep -q 'formats: \[bvh\]' "$d/pipeline.yaml" || die "could not set export.formats"
   echo "$d"
 }
