@@ -48,6 +48,10 @@ enum Command {
         /// Grid spacing of the subject's true surface, metres (smaller: finer true meshes).
         #[arg(long, default_value_t = 0.01)]
         mesh_spacing: f64,
+        /// The humanoid's motion: `default`, or `dance` (fast arms crossing, a leg crossing
+        /// step and a 120-degree turn at 25 frames per second, 39 frames).
+        #[arg(long, value_enum, default_value = "default")]
+        motion: hullpose::synth::Motion,
     },
     /// Run the pipeline: compute what is stale, reuse what the cache holds.
     Run {
@@ -558,8 +562,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             frames,
             seed,
             mesh_spacing,
+            motion,
         } => {
             let mut opts = SynthOptions::new(scene, out);
+            opts.motion = motion;
             opts.cameras = cameras;
             opts.width = width;
             opts.height = height;

@@ -188,3 +188,44 @@ fn humanoid_parts_touch_on_contact_frames_and_not_at_t0() {
         );
     }
 }
+
+/// `--motion dance`: hand steps of 10-15 cm per frame at their fastest (never over 17), the
+/// left foot crossing to the right of the right foot, and a turn of at least 90 degrees.
+#[test]
+fn the_dance_is_fast_crosses_the_legs_and_turns() {
+    use hullpose::synth::{Motion, SceneKind, SynthOptions};
+    let mut options = SynthOptions::new(SceneKind::Humanoid, "unused");
+    options.motion = Motion::Dance;
+    let scene = hullpose::synth::build_scene(&options).unwrap();
+    let skeleton = &scene.body.skeleton;
+    let bone = |n: &str| skeleton.bone_index(n).unwrap();
+    let joints: Vec<_> = scene.poses.iter().map(|p| scene.body.joints(p)).collect();
+    assert_eq!(joints.len(), 39);
+    let hand_step = |f: usize| {
+        ["hand_l", "hand_r"]
+            .iter()
+            .map(|h| (joints[f][bone(h)].1 - joints[f - 1][bone(h)].1).norm())
+            .fold(0.0, f64::max)
+    };
+    let fastest = (1..joints.len()).map(hand_step).fold(0.0, f64::max);
+    assert!(
+        (0.10..=0.17).contains(&fastest),
+        "fastest hand step {fastest} m"
+    );
+    // The left foot passes the right one sideways (in the body's turning frame: compare
+    // along the line between the hips).
+    let crossed = joints.iter().any(|j| {
+        let across = j[bone("thigh_l")].0 - j[bone("thigh_r")].0;
+        (j[bone("foot_l")].0 - j[bone("foot_r")].0).dot(&across) < 0.0
+    });
+    assert!(crossed, "the left foot crosses the right");
+    let hips = |j: &Vec<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)>| {
+        let d = j[bone("thigh_l")].0 - j[bone("thigh_r")].0;
+        d.y.atan2(d.x)
+    };
+    let turn = (hips(joints.last().unwrap()) - hips(&joints[0]))
+        .to_degrees()
+        .abs();
+    let turn = turn.min(360.0 - turn);
+    assert!(turn >= 90.0, "turned {turn} degrees");
+}

@@ -13,6 +13,12 @@ use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 
 /// Number of key frames of the motion.
 pub const KEY_FRAMES: usize = 24;
+
+/// Key frames of the dance (`--motion dance`), at 25 per second.
+pub const DANCE_KEY_FRAMES: usize = 39;
+
+/// How far the dance turns the body about the vertical over its key frames, degrees.
+const DANCE_TURN_DEG: f64 = 120.0;
 /// Gap the contact poses aim for between touching parts (slightly pressed), metres.
 const CONTACT_GAP: f64 = -0.003;
 
@@ -336,6 +342,19 @@ fn hand_on_knee(body: &Body) -> Pose {
     p.pose
 }
 
+/// The left leg stepping across the right: the thigh forward and inward, the shin down past
+/// the right shin, the foot flat.
+fn leg_across(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    p.point("thigh_l", Vector3::new(-0.45, -0.3, -1.0));
+    p.point("shin_l", Vector3::new(-0.35, 0.0, -1.0));
+    p.point("foot_l", Vector3::new(0.0, -1.0, -0.3));
+    // The arms open for balance.
+    p.point("upper_arm_l", Vector3::new(1.0, 0.0, -0.6));
+    p.point("upper_arm_r", Vector3::new(-1.0, 0.0, -0.6));
+    p.pose
+}
+
 /// Interpolates two poses (per-bone world rotations by slerp, root translation linearly).
 fn blend(a: &Pose, b: &Pose, t: f64) -> Pose {
     Pose {
@@ -357,58 +376,87 @@ fn blend(a: &Pose, b: &Pose, t: f64) -> Pose {
 type Key<'a> = (f64, &'a Pose, Vec<(usize, usize)>);
 
 /// Builds the humanoid scene with `frames` frames sampled over the motion.
-pub fn scene(cameras: usize, width: u32, height: u32, frames: usize, seed: u64) -> Scene {
+pub fn scene(
+    cameras: usize,
+    width: u32,
+    height: u32,
+    frames: usize,
+    seed: u64,
+    motion: super::Motion,
+) -> Scene {
     let body = body();
     let bone = |n: &str| body.skeleton.bone_index(n).expect("known bone");
-    let (a, hips, cross, knee) = (
+    let (a, hips, cross, knee, step) = (
         a_pose(&body),
         hands_on_hips(&body),
         forearms_crossed(&body),
         hand_on_knee(&body),
+        leg_across(&body),
     );
-    let keys: Vec<Key> = vec![
+    let crossed = || {
+        vec![
+            (bone("forearm_r"), bone("chest")),
+            (bone("forearm_l"), bone("forearm_r")),
+        ]
+    };
+    let dance: Vec<Key> = vec![
         (0.0, &a, vec![]),
-        (
-            4.0,
-            &hips,
-            vec![
-                (bone("hand_l"), bone("pelvis")),
-                (bone("hand_r"), bone("pelvis")),
-            ],
-        ),
-        (
-            5.0,
-            &hips,
-            vec![
-                (bone("hand_l"), bone("pelvis")),
-                (bone("hand_r"), bone("pelvis")),
-            ],
-        ),
-        (8.0, &a, vec![]),
-        (
-            12.0,
-            &cross,
-            vec![
-                (bone("forearm_r"), bone("chest")),
-                (bone("forearm_l"), bone("forearm_r")),
-            ],
-        ),
-        (
-            13.0,
-            &cross,
-            vec![
-                (bone("forearm_r"), bone("chest")),
-                (bone("forearm_l"), bone("forearm_r")),
-            ],
-        ),
-        (16.0, &a, vec![]),
-        (20.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
-        (21.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
-        (23.0, &a, vec![]),
+        (13.0, &cross, crossed()),
+        (26.0, &a, vec![]),
+        (32.0, &step, vec![]),
+        (38.0, &a, vec![]),
     ];
+    let (key_frames, turn_deg) = match motion {
+        super::Motion::Dance => (DANCE_KEY_FRAMES, DANCE_TURN_DEG),
+        super::Motion::Default => (KEY_FRAMES, 0.0),
+    };
+    let keys: Vec<Key> = if motion == super::Motion::Dance {
+        dance
+    } else {
+        vec![
+            (0.0, &a, vec![]),
+            (
+                4.0,
+                &hips,
+                vec![
+                    (bone("hand_l"), bone("pelvis")),
+                    (bone("hand_r"), bone("pelvis")),
+                ],
+            ),
+            (
+                5.0,
+                &hips,
+                vec![
+                    (bone("hand_l"), bone("pelvis")),
+                    (bone("hand_r"), bone("pelvis")),
+                ],
+            ),
+            (8.0, &a, vec![]),
+            (
+                12.0,
+                &cross,
+                vec![
+                    (bone("forearm_r"), bone("chest")),
+                    (bone("forearm_l"), bone("forearm_r")),
+                ],
+            ),
+            (
+                13.0,
+                &cross,
+                vec![
+                    (bone("forearm_r"), bone("chest")),
+                    (bone("forearm_l"), bone("forearm_r")),
+                ],
+            ),
+            (16.0, &a, vec![]),
+            (20.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
+            (21.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
+            (23.0, &a, vec![]),
+        ]
+    };
     let mut poses = Vec::new();
     let mut contacts = Vec::new();
-    for (f, t) in scene::sample_times(KEY_FRAMES, frames)
+    for (f, t) in scene::sample_times(key_frames, frames)
         .into_iter()
         .enumerate()
     {
@@ -423,6 +471,14 @@ pub fn scene(cameras: usize, width: u32, height: u32, frames: usize, seed: u64) 
             // Ease in and out between key poses.
             let u = u * u * (3.0 - 2.0 * u);
             poses.push(blend(keys[k].1, keys[k + 1].1, u));
+        }
+        // The dance turns the whole body about the vertical through the pelvis.
+        let last = (key_frames - 1) as f64;
+        let turn =
+            Rotation3::from_axis_angle(&Vector3::z_axis(), (turn_deg * t / last).to_radians());
+        let pose = poses.last_mut().expect("pushed");
+        for r in &mut pose.rotations {
+            *r = turn * *r;
         }
     }
     let cams = scene::camera_ring(

@@ -28,8 +28,8 @@ use std::time::Instant;
 /// The export settings of a synthetic capture's pipeline.yaml: its world stands on +z, and
 /// its `frame_rate` frames per second make the motion last as long as its key frames at
 /// their own rate, however many frames sample it (`frames` of the scene's key frames).
-fn synth_export_yaml(frames: usize, scene: SceneKind) -> String {
-    let (key_frames, key_rate) = key_frames(scene);
+fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
+    let (key_frames, key_rate) = key_frames(opts);
     let rate = key_rate * (frames.max(2) - 1) as f64 / (key_frames.max(2) - 1) as f64;
     format!(
         "# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
@@ -37,6 +37,18 @@ fn synth_export_yaml(frames: usize, scene: SceneKind) -> String {
          frame_rate: {}        # the motion's key frames at {key_rate} per second\n",
         (rate * 100.0).round() / 100.0
     )
+}
+
+/// Which motion the humanoid performs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Motion {
+    /// The scene's own motion (the humanoid: hands on hips, forearms crossed, hand on knee).
+    #[default]
+    Default,
+    /// Fast motion at 25 frames per second (humanoid only): the arms swing across the
+    /// chest and back with hand steps of 10-15 cm per frame, the left leg steps across the
+    /// right, and the whole body turns 120 degrees over the sequence (39 frames).
+    Dance,
 }
 
 /// Which scene to make.
@@ -68,6 +80,8 @@ pub struct SynthOptions {
     /// Frames before this index are not written (for quick datasets of late frames; the
     /// written frames keep their indices).
     pub first_frame: usize,
+    /// The humanoid's motion.
+    pub motion: Motion,
 }
 
 impl SynthOptions {
@@ -83,6 +97,7 @@ impl SynthOptions {
             seed: 0,
             mesh_spacing: 0.01,
             first_frame: 0,
+            motion: Motion::Default,
         }
     }
 }
@@ -105,6 +120,9 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     if opts.frames == Some(0) {
         return Err(Error::Usage("--frames must be at least 1".into()));
     }
+    if opts.motion == Motion::Dance && opts.scene != SceneKind::Humanoid {
+        return Err(Error::Usage("--motion dance needs --scene humanoid".into()));
+    }
     Ok(match opts.scene {
         SceneKind::Tripod => tripod::scene(
             opts.cameras,
@@ -117,19 +135,21 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
             opts.cameras,
             opts.width,
             opts.height,
-            opts.frames.unwrap_or(humanoid::KEY_FRAMES),
+            opts.frames.unwrap_or(key_frames(opts).0),
             opts.seed,
+            opts.motion,
         ),
     })
 }
 
 /// The number of key frames of a scene's motion, and their rate (frames per second) at
 /// which its joints move no faster than people do: the tripod's 16 cm steps at 25, the
-/// humanoid's hand sweeps of up to 60 cm at 8.
-fn key_frames(scene: SceneKind) -> (usize, f64) {
-    match scene {
-        SceneKind::Tripod => (tripod::KEY_FRAMES, 25.0),
-        SceneKind::Humanoid => (humanoid::KEY_FRAMES, 8.0),
+/// humanoid's hand sweeps of up to 60 cm at 8, the dance's 10-15 cm steps at 25.
+fn key_frames(opts: &SynthOptions) -> (usize, f64) {
+    match (opts.scene, opts.motion) {
+        (SceneKind::Tripod, _) => (tripod::KEY_FRAMES, 25.0),
+        (SceneKind::Humanoid, Motion::Dance) => (humanoid::DANCE_KEY_FRAMES, 25.0),
+        (SceneKind::Humanoid, Motion::Default) => (humanoid::KEY_FRAMES, 8.0),
     }
 }
 
@@ -297,7 +317,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         format!(
             "{}{}",
             crate::config::default_yaml("calib/cameras.yaml", &format!("data/{}", scene.name)),
-            synth_export_yaml(nf, opts.scene)
+            synth_export_yaml(nf, opts)
         )
         .as_bytes(),
     )?;
