@@ -223,10 +223,11 @@ pub(super) fn compute(
     )
 }
 
-/// Writes a frame's artifacts.
 /// Cell of the coarse model the fit's health is measured with, metres.
 const HEALTH_CELL: f64 = 0.02;
 
+/// Writes a frame's artifacts; `recent` holds the worst silhouette IoU of the frames fitted
+/// before it in this run (its health checks compare against them), and gets its own.
 fn write_frame(
     ctx: &Context,
     model: &BodyModel,

@@ -95,11 +95,10 @@ pub fn bones_inside(skeleton: &Skeleton, mesh: &TriMesh) -> std::result::Result<
 /// cache): a line saying which surface every bone lies inside, `None` when no surface is
 /// at hand yet, an error naming the bone otherwise.
 pub fn check_skeleton(ctx: &Context) -> Result<Option<String>> {
-    let skeleton_path = ctx.sequence.dir.join("skeleton.yaml");
-    if !skeleton_path.is_file() {
+    let Some(skeleton) = ctx.sequence.skeleton()? else {
         return Ok(None);
-    }
-    let skeleton = Skeleton::read(&skeleton_path)?;
+    };
+    let skeleton_path = ctx.sequence.dir.join("skeleton.yaml");
     let frame = skeleton.reference_frame;
     let (ply, _) = hull_files(frame);
     let surface = match &ctx.config.model.mesh {

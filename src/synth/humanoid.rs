@@ -393,66 +393,48 @@ pub fn scene(
         hand_on_knee(&body),
         leg_across(&body),
     );
+    // The bone pairs meant to touch in each contact pose.
     let crossed = || {
         vec![
             (bone("forearm_r"), bone("chest")),
             (bone("forearm_l"), bone("forearm_r")),
         ]
     };
-    let dance: Vec<Key> = vec![
-        (0.0, &a, vec![]),
-        (13.0, &cross, crossed()),
-        (26.0, &a, vec![]),
-        (32.0, &step, vec![]),
-        (38.0, &a, vec![]),
-    ];
-    let (key_frames, turn_deg) = match motion {
-        super::Motion::Dance => (DANCE_KEY_FRAMES, DANCE_TURN_DEG),
-        super::Motion::Default => (KEY_FRAMES, 0.0),
-    };
-    let keys: Vec<Key> = if motion == super::Motion::Dance {
-        dance
-    } else {
+    let on_hips = || {
         vec![
-            (0.0, &a, vec![]),
-            (
-                4.0,
-                &hips,
-                vec![
-                    (bone("hand_l"), bone("pelvis")),
-                    (bone("hand_r"), bone("pelvis")),
-                ],
-            ),
-            (
-                5.0,
-                &hips,
-                vec![
-                    (bone("hand_l"), bone("pelvis")),
-                    (bone("hand_r"), bone("pelvis")),
-                ],
-            ),
-            (8.0, &a, vec![]),
-            (
-                12.0,
-                &cross,
-                vec![
-                    (bone("forearm_r"), bone("chest")),
-                    (bone("forearm_l"), bone("forearm_r")),
-                ],
-            ),
-            (
-                13.0,
-                &cross,
-                vec![
-                    (bone("forearm_r"), bone("chest")),
-                    (bone("forearm_l"), bone("forearm_r")),
-                ],
-            ),
-            (16.0, &a, vec![]),
-            (20.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
-            (21.0, &knee, vec![(bone("hand_r"), bone("thigh_l"))]),
-            (23.0, &a, vec![]),
+            (bone("hand_l"), bone("pelvis")),
+            (bone("hand_r"), bone("pelvis")),
         ]
+    };
+    let on_knee = || vec![(bone("hand_r"), bone("thigh_l"))];
+    let (keys, key_frames, turn_deg): (Vec<Key>, usize, f64) = match motion {
+        super::Motion::Dance => (
+            vec![
+                (0.0, &a, vec![]),
+                (13.0, &cross, crossed()),
+                (26.0, &a, vec![]),
+                (32.0, &step, vec![]),
+                (38.0, &a, vec![]),
+            ],
+            DANCE_KEY_FRAMES,
+            DANCE_TURN_DEG,
+        ),
+        super::Motion::Default => (
+            vec![
+                (0.0, &a, vec![]),
+                (4.0, &hips, on_hips()),
+                (5.0, &hips, on_hips()),
+                (8.0, &a, vec![]),
+                (12.0, &cross, crossed()),
+                (13.0, &cross, crossed()),
+                (16.0, &a, vec![]),
+                (20.0, &knee, on_knee()),
+                (21.0, &knee, on_knee()),
+                (23.0, &a, vec![]),
+            ],
+            KEY_FRAMES,
+            0.0,
+        ),
     };
     let mut poses = Vec::new();
     let mut contacts = Vec::new();
