@@ -39,7 +39,7 @@ enum Command {
         #[arg(long, default_value_t = 768)]
         height: u32,
         /// Number of frames sampled over the motion (default: its key frames, 19 for the
-        /// tripod, 24 for the humanoid).
+        /// tripod, 24 for the humanoid, 39 for its dance).
         #[arg(long)]
         frames: Option<usize>,
         /// Random seed (camera jitter, pixel noise); the same seed gives the same bytes.

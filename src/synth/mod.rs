@@ -46,7 +46,7 @@ pub enum Motion {
     #[default]
     Default,
     /// Fast motion at 25 frames per second (humanoid only): the arms swing across the
-    /// chest and back with hand steps of 10-15 cm per frame, the left leg steps across the
+    /// chest and back with hand steps of up to 16 cm per frame, the left leg steps across the
     /// right, and the whole body turns 120 degrees over the sequence (39 frames).
     Dance,
 }
@@ -144,7 +144,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
 
 /// The number of key frames of a scene's motion, and their rate (frames per second) at
 /// which its joints move no faster than people do: the tripod's 16 cm steps at 25, the
-/// humanoid's hand sweeps of up to 60 cm at 8, the dance's 10-15 cm steps at 25.
+/// humanoid's hand sweeps of up to 60 cm at 8, the dance's steps of up to 16 cm at 25.
 fn key_frames(opts: &SynthOptions) -> (usize, f64) {
     match (opts.scene, opts.motion) {
         (SceneKind::Tripod, _) => (tripod::KEY_FRAMES, 25.0),
