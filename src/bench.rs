@@ -468,12 +468,14 @@ pub fn track(
         crate::fsutil::write_atomic(path, text.as_bytes())?;
     }
     let mut out = format!(
-        "tracking, method {}, model_spacing {} m, sample_spacing {} m\n  frame  seconds  rounds  error_cm     rms_mm  status\n",
+        "tracking, method {}, model_spacing {} m, sample_spacing {} m\n  frame  seconds  rounds  error_cm     rms_mm  unexpl_cm2  status  recovery\n",
         params.method.name(),
         params.model_spacing,
         params.sample_spacing
     );
     let (mut fitted, mut seconds, mut rounds) = (0usize, 0.0, 0usize);
+    // Frames with a recovery, and their seconds.
+    let (mut recovered, mut recovery_seconds) = (0usize, 0.0);
     for (frame, secs) in &tracked.seconds {
         let Some((_, r)) = tracked.results.iter().find(|x| x.0 == *frame) else {
             continue;
@@ -485,15 +487,21 @@ pub fn track(
             .map_or("-".to_string(), |e| format!("{:.2}", e.1 * 100.0));
         let _ = writeln!(
             out,
-            "  {frame:>5} {secs:>8.3} {:>7} {error:>9} {:>10.3}  {}",
+            "  {frame:>5} {secs:>8.3} {:>7} {error:>9} {:>10.3} {:>11.0}  {}  {}",
             d.iterations,
             d.rms * 1e3,
-            d.status.name()
+            crate::fit::unexplained_cm2(d, params.sample_spacing),
+            d.status.name(),
+            d.recovery.as_deref().unwrap_or("")
         );
         if d.status != crate::fit::FitStatus::Reference {
             fitted += 1;
             seconds += secs;
             rounds += d.iterations;
+            if d.recovery.is_some() {
+                recovered += 1;
+                recovery_seconds += secs;
+            }
         }
     }
     let _ = writeln!(out, "  per round ({rounds} rounds):");
@@ -508,6 +516,13 @@ pub fn track(
         out,
         "  {fitted} tracked frames in {seconds:.2} s: {:.3} s per frame",
         seconds / fitted.max(1) as f64
+    );
+    let others = fitted - recovered;
+    let _ = writeln!(
+        out,
+        "  recovery on {recovered} frames: {:.3} s per frame there, {:.3} s per frame on the {others} others",
+        recovery_seconds / recovered.max(1) as f64,
+        (seconds - recovery_seconds) / others.max(1) as f64
     );
     Ok(out)
 }

@@ -19,13 +19,21 @@ pub fn read(output: &Path) -> Result<Vec<HealthRow>> {
 /// A printed table of health rows.
 pub fn table(rows: &[HealthRow]) -> String {
     let mut s = format!(
-        "{:>6}  {:>13}  {:>6}  {:>9}  {:>10}  {:>10}  {:>13}  flags\n",
-        "frame", "status", "rounds", "IoU worst", "(camera)", "IoU median", "joint motion"
+        "{:>6}  {:>13}  {:>6}  {:>9}  {:>10}  {:>10}  {:>13}  {:>11}  {:>14}  flags\n",
+        "frame",
+        "status",
+        "rounds",
+        "IoU worst",
+        "(camera)",
+        "IoU median",
+        "joint motion",
+        "unexplained",
+        "recovery"
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{:>6}  {:>13}  {:>6}  {:>9.3}  {:>10}  {:>10.3}  {:>10.1} cm  {}",
+            "{:>6}  {:>13}  {:>6}  {:>9.3}  {:>10}  {:>10.3}  {:>10.1} cm  {:>7.0} cm2  {:>14}  {}",
             r.frame,
             r.status,
             r.iterations,
@@ -33,6 +41,8 @@ pub fn table(rows: &[HealthRow]) -> String {
             r.iou_worst_camera,
             r.iou_median,
             100.0 * r.joint_motion,
+            r.unexplained_cm2,
+            r.recovery,
             r.flags
         );
     }

@@ -200,5 +200,6 @@ fn finish(pose: Pose, round: &Round, mut diagnostics: FitDiagnostics) -> FitResu
     diagnostics.downweighted_share = round.downweighted as f64 / round.pairs.max(1) as f64;
     diagnostics.contact_share = round.contact_share;
     diagnostics.score = round.score();
+    diagnostics.unexplained = round.unexplained.clone();
     FitResult { pose, diagnostics }
 }

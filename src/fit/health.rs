@@ -27,6 +27,9 @@ pub struct Health {
     /// The largest motion of any joint since the previous tracked frame, metres (0 at the
     /// reference frame).
     pub joint_motion: f64,
+    /// The reliable observed surface the fit left unexplained, cm^2
+    /// ([`crate::fit::unexplained_cm2`]).
+    pub unexplained_cm2: f64,
 }
 
 /// The body model's mesh coarsened for the silhouette check (vertex clustering on a grid of
@@ -126,6 +129,7 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
         iou_worst_camera,
         iou_median,
         joint_motion,
+        unexplained_cm2: 0.0,
     }
 }
 
@@ -135,7 +139,8 @@ const RECENT_FRAMES: usize = 5;
 /// Why a frame is implausible (empty when it is not): `fast_joint` when a joint moved
 /// faster than `p.max_joint_speed` at `frame_rate`, `iou_drop` when the worst IoU fell below
 /// `p.iou_drop` times the median of `recent` (the previous frames' worst IoU, oldest first;
-/// only its last [`RECENT_FRAMES`] count).
+/// only its last [`RECENT_FRAMES`] count), `unexplained` when the fit left at least
+/// `p.unexplained_cm2` of reliable observed surface unexplained.
 pub fn flags(
     h: &Health,
     recent: &[f64],
@@ -149,6 +154,9 @@ pub fn flags(
     let last = &recent[recent.len().saturating_sub(RECENT_FRAMES)..];
     if !last.is_empty() && h.iou_worst < p.iou_drop * summarize(last, 0.0).iou_median {
         out.push("iou_drop");
+    }
+    if h.unexplained_cm2 >= p.unexplained_cm2 {
+        out.push("unexplained");
     }
     out
 }
@@ -207,9 +215,13 @@ mod tests {
         let p = crate::fit::params::HealthParams::default();
         let good = summarize(&[0.95, 0.96], 0.1);
         assert!(flags(&good, &[0.96, 0.95, 0.97], &p, 25.0).is_empty());
-        let lost = summarize(&[0.7, 0.96], 0.3);
-        assert_eq!(flags(&lost, &[0.96], &p, 25.0), ["fast_joint", "iou_drop"]);
-        assert!(flags(&lost, &[], &p, 10.0).is_empty());
+        let mut lost = summarize(&[0.7, 0.96], 0.3);
+        lost.unexplained_cm2 = 12.0;
+        assert_eq!(
+            flags(&lost, &[0.96], &p, 25.0),
+            ["fast_joint", "iou_drop", "unexplained"]
+        );
+        assert_eq!(flags(&lost, &[], &p, 10.0), ["unexplained"]);
         let h = summarize(&[0.9, 0.5, 0.8, 0.95], 0.02);
         assert_eq!((h.iou_worst, h.iou_worst_camera), (0.5, 1));
         assert!((h.iou_median - 0.85).abs() < 1e-12);

@@ -24,6 +24,7 @@ mod moments;
 pub mod pairs;
 pub mod params;
 pub mod probe;
+mod recovery;
 pub mod result;
 mod round;
 pub mod solve;
@@ -31,9 +32,10 @@ pub mod tracking;
 
 pub use descent::POINT_SHARE;
 pub use pairs::{thin, COMPATIBLE_SEARCH_LIMIT};
-pub use params::{validate, FitParams, Method, RestartParams, Start, StopParams};
+pub use params::{validate, FitParams, HealthParams, Method, RestartParams, Start, StopParams};
 pub use probe::{Probe, RoundKind, RoundRecord, STEP_PART_PREFIX};
-pub use result::{FitDiagnostics, FitResult, FitStatus, Observation};
+pub use recovery::{other_side, unexplained_cm2};
+pub use result::{FitDiagnostics, FitResult, FitStatus, Observation, Unexplained};
 pub use tracking::{joint_motion, Neighbours, Tracker};
 
 use crate::geometry::TriMesh;
@@ -51,6 +53,10 @@ pub struct Fitter<'a> {
     sample: BodyModel,
     sample_normals: Vec<Vector3<f64>>,
     contact: ContactSearch,
+    /// The farthest a joint plausibly moves between two frames, metres
+    /// (`fit.health.max_joint_speed` over the frame rate); a tracked fit that moves one
+    /// farther is recovered ([`recovery`]). `None`: no such check.
+    pub max_joint_step: Option<f64>,
 }
 
 impl<'a> Fitter<'a> {
@@ -74,6 +80,7 @@ impl<'a> Fitter<'a> {
             sample,
             sample_normals,
             contact,
+            max_joint_step: None,
         }
     }
 

@@ -155,6 +155,11 @@ pub struct HealthParams {
     /// the recent level (the median of the previous five tracked frames' worst IoU).
     /// Default 0.9.
     pub iou_drop: f64,
+    /// A frame is flagged, and fitted again from the recovery hypotheses (`recovery.rs`),
+    /// when the fitted pose leaves more than this much reliable observed surface (rho_p at
+    /// least 0.5) farther than 3 cm from the model, cm^2. Default 8 (a fit from the true
+    /// pose leaves 0-2 on the humanoid's dance, a hand folded back 9-18).
+    pub unexplained_cm2: f64,
 }
 
 impl Default for HealthParams {
@@ -162,6 +167,7 @@ impl Default for HealthParams {
         HealthParams {
             max_joint_speed: 6.0,
             iou_drop: 0.9,
+            unexplained_cm2: 8.0,
         }
     }
 }
@@ -253,6 +259,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
             "fit.health: max_joint_speed must be a positive number of metres per second and \
              iou_drop a share in (0, 1], got {} and {}",
             h.max_joint_speed, h.iou_drop
+        ));
+    }
+    if !positive(h.unexplained_cm2) {
+        return Err(format!(
+            "fit.health.unexplained_cm2 must be a positive area in cm^2, got {}",
+            h.unexplained_cm2
         ));
     }
     let r = &p.restart;

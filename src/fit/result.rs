@@ -72,6 +72,11 @@ pub struct FitDiagnostics {
     pub score: f64,
     /// Observed vertices.
     pub observed: usize,
+    /// The reliable observed surface the final pose leaves unexplained (`round.rs`).
+    pub unexplained: Unexplained,
+    /// Recovery (`recovery.rs`): not tried (`None`), tried and the first fit kept
+    /// (`kept`), or the hypothesis that won.
+    pub recovery: Option<String>,
 }
 
 impl FitDiagnostics {
@@ -87,6 +92,8 @@ impl FitDiagnostics {
             contact_share: 0.0,
             score: 0.0,
             observed,
+            unexplained: Default::default(),
+            recovery: None,
         }
     }
 }
@@ -96,4 +103,13 @@ impl FitDiagnostics {
 pub struct FitResult {
     pub pose: Pose,
     pub diagnostics: FitDiagnostics,
+}
+
+/// The reliable observed surface the posed model leaves unexplained: how many thinned
+/// observed vertices (about one per `sample_spacing` squared of surface), and the bone
+/// whose model vertices are most often their nearest (the part that should be there).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Unexplained {
+    pub vertices: usize,
+    pub bone: Option<usize>,
 }

@@ -8,7 +8,7 @@
 use super::pairs::{find_pairs, search_cell, Partner, Prepared};
 use super::probe::{Probe, RHO_C_REBUILDING, RHO_C_SCANNING, RHO_C_STALENESS};
 use super::solve::{Plane, Targets};
-use super::{Fitter, Method, Observation};
+use super::{Fitter, Method, Observation, Unexplained};
 use crate::skeleton::skinning::pose_vertices;
 use crate::skeleton::{Pose, PosedBones};
 use nalgebra::Vector3;
@@ -38,7 +38,15 @@ pub(super) struct Round {
     /// `weighted_sq` and `normalizer` with rho_c taken as 1 (see [`Round::score`]).
     pub scored_sq: f64,
     pub score_normalizer: f64,
+    /// Reliable observed vertices (rho_p at least 0.5) farther than [`UNEXPLAINED_DISTANCE`]
+    /// from the posed model ([`Unexplained`]).
+    pub unexplained: Unexplained,
 }
+
+/// An observed vertex is unexplained when the posed model is farther than this from it,
+/// metres: a part the fit lost leaves the surface it should cover without a model partner.
+/// Fits from the true pose leave almost none at 3 cm on the humanoid's dance (BENCHMARKS.md).
+pub const UNEXPLAINED_DISTANCE: f64 = 0.03;
 
 impl Round {
     /// Paper eq. 4 with these pairs and weights.
@@ -208,6 +216,7 @@ impl Fitter<'_> {
             }
         }
         let n = w.forward.len();
+        let unexplained = self.unexplained(w, obs);
         let r_c: f64 = rho_c.iter().sum();
         let r_p: f64 = if method.uses_rho_p() {
             obs.rho_p.iter().sum()
@@ -229,7 +238,25 @@ impl Fitter<'_> {
             contact_share: rho_c.iter().filter(|&&r| r < 0.5).count() as f64 / n.max(1) as f64,
             scored_sq,
             score_normalizer: score_normalizer.max(1e-300),
+            unexplained,
         }
+    }
+
+    /// The reliable observed vertices whose nearest model vertex is farther than
+    /// [`UNEXPLAINED_DISTANCE`], and the bone most of their model partners move with.
+    fn unexplained(&self, w: &Weighed, obs: &Observation) -> Unexplained {
+        let mut per_bone = vec![0usize; self.sample.skeleton.bones.len()];
+        let far = UNEXPLAINED_DISTANCE * UNEXPLAINED_DISTANCE;
+        for (u, &(v, d2)) in w.backward.iter().enumerate() {
+            if d2.is_finite() && d2 > far && obs.rho_p[u] >= 0.5 {
+                per_bone[self.sample.labels[v]] += 1;
+            }
+        }
+        let vertices = per_bone.iter().sum();
+        let bone = (vertices > 0)
+            .then(|| (0..per_bone.len()).max_by_key(|&b| (per_bone[b], std::cmp::Reverse(b))))
+            .flatten();
+        Unexplained { vertices, bone }
     }
 }
 

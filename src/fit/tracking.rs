@@ -77,6 +77,7 @@ impl<'a> Tracker<'a> {
                     .fit_tracked(obs, start, before, previous_fit.as_ref(), probe)
             }
         };
+
         self.done
             .insert(frame, (result.pose.clone(), result.diagnostics.clone()));
         result
@@ -114,7 +115,8 @@ impl Fitter<'_> {
             return best;
         }
         if !self.lost(&best, &first, previous, previous_fit) {
-            return self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
+            let best = self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
+            return self.recovered(&prepared, best, previous, cap, probe);
         }
         let mut rest = Pose::rest(previous.rotations.len());
         rest.translation = previous.translation;
@@ -130,7 +132,23 @@ impl Fitter<'_> {
             let r = self.fit_prepared(&prepared, start, cap * p.restart.rounds_factor, probe);
             best = better(best, r);
         }
-        self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe)
+        let best = self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
+        self.recovered(&prepared, best, previous, cap, probe)
+    }
+
+    /// `best`, or its recovery ([`super::recovery`]) when it needs one.
+    fn recovered(
+        &self,
+        prepared: &super::pairs::Prepared,
+        best: FitResult,
+        previous: &Pose,
+        cap: usize,
+        probe: &Probe,
+    ) -> FitResult {
+        match self.needs_recovery(&best, previous) {
+            Some(_) => self.recover(prepared, best, cap, probe),
+            None => best,
+        }
     }
 
     /// A per-limb restart: when the best fit bent one joint by more than
@@ -245,7 +263,7 @@ fn largest_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
 
 /// The fit with the lower score ([`FitDiagnostics::score`]), with the rounds and steps of
 /// both.
-fn better(a: FitResult, b: FitResult) -> FitResult {
+pub(super) fn better(a: FitResult, b: FitResult) -> FitResult {
     let (rounds, steps) = (
         a.diagnostics.iterations + b.diagnostics.iterations,
         a.diagnostics.lm_steps + b.diagnostics.lm_steps,

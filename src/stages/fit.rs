@@ -24,9 +24,13 @@ pub const DIAGNOSTICS_HEADER: &str =
 
 /// The health columns that follow the diagnostics in the stage's CSVs
 /// ([`crate::fit::health`]): the worst camera's silhouette IoU, that camera's name, the
-/// median IoU over the cameras, the largest joint motion since the previous frame, and the
-/// health checks that failed (`fast_joint`, `iou_drop`, joined by `+`; empty when none).
-pub const HEALTH_HEADER: &str = "iou_worst,iou_worst_camera,iou_median,joint_motion_m,flags";
+/// median IoU over the cameras, the largest joint motion since the previous frame, the
+/// reliable observed surface the fit left unexplained (cm^2), the recovery (empty: not
+/// needed; `kept`: tried, the first fit kept; else the hypothesis that won), and the
+/// health checks that failed after it (`fast_joint`, `iou_drop`, `unexplained`, joined by
+/// `+`; empty when none).
+pub const HEALTH_HEADER: &str =
+    "iou_worst,iou_worst_camera,iou_median,joint_motion_m,unexplained_cm2,recovery,flags";
 
 /// The per-frame file names: (pose, joints, diagnostics, mesh).
 pub fn files(frame: u32) -> [String; 4] {
@@ -120,7 +124,9 @@ pub fn track(
 ) -> Result<()> {
     let t0 = model.skeleton.reference_frame;
     let seq = ctx.sequence;
-    let mut tracker = Tracker::new(Fitter::new(model, params.clone()));
+    let mut fitter = Fitter::new(model, params.clone());
+    fitter.max_joint_step = Some(params.health.max_joint_speed / ctx.config.export.frame_rate);
+    let mut tracker = Tracker::new(fitter);
     for &frame in frames {
         let neighbours = if frame == t0 {
             None
@@ -250,17 +256,21 @@ fn write_frame(
         &joint_rows(skeleton, frame, &result.pose),
     )?;
     let mesh = model.pose(&result.pose);
-    let health = frame_health(ctx, model, frame, &result.pose, &coarse.posed(&mesh))?;
+    let mut health = frame_health(ctx, model, frame, &result.pose, &coarse.posed(&mesh))?;
+    health.unexplained_cm2 =
+        crate::fit::unexplained_cm2(&result.diagnostics, ctx.config.fit.sample_spacing);
     let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
     let p = &ctx.config.fit.health;
     let flags = crate::fit::health::flags(&health, recent, p, ctx.config.export.frame_rate);
     recent.push(health.iou_worst);
     let diag = format!(
-        "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{}\n",
+        "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{:.0},{},{}\n",
         diagnostics_row(frame, &result.diagnostics),
         health.iou_worst,
         health.iou_median,
         health.joint_motion,
+        health.unexplained_cm2,
+        result.diagnostics.recovery.as_deref().unwrap_or(""),
         flags.join("+"),
     );
     crate::fsutil::write_atomic(&dir.join(&names[2]), diag.as_bytes())?;
@@ -281,15 +291,6 @@ fn write_frame(
         PlyFormat::BinaryLittleEndian,
     )?;
     let mut warnings = Vec::new();
-    if !flags.is_empty() {
-        warnings.push(format!(
-            "fit: frame {frame} looks implausible ({}): worst silhouette IoU {:.3} ({worst_camera}), \
-             a joint moved {:.1} cm; see `pipeline evaluate` and README \"Reading the fit's health\"",
-            flags.join(", "),
-            health.iou_worst,
-            100.0 * health.joint_motion
-        ));
-    }
     if result.diagnostics.status == FitStatus::NoObservation {
         warnings.push(format!(
             "fit: frame {frame} has too little observed surface ({} vertices); it keeps the previous pose",
@@ -359,11 +360,56 @@ pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
     for (path, text) in &written {
         crate::fsutil::write_atomic(path, text.as_bytes())?;
     }
+    let health = parse_health(&written[2].0, &written[2].1)?;
     Ok(super::Finished {
         outputs: written.into_iter().map(|x| x.0).collect(),
         files: 3,
-        warnings: Vec::new(),
+        warnings: health_summary(&health),
     })
+}
+
+/// The run summary's lines on the fit's health: the frames that needed recovery (and which
+/// hypothesis won), and the frames still flagged after it.
+fn health_summary(rows: &[HealthRow]) -> Vec<String> {
+    let list = |rows: Vec<String>| -> String {
+        const SHOWN: usize = 12;
+        let more = rows.len().saturating_sub(SHOWN);
+        let mut s = rows.into_iter().take(SHOWN).collect::<Vec<_>>().join(", ");
+        if more > 0 {
+            s += &format!(" and {more} more");
+        }
+        s
+    };
+    let mut out = Vec::new();
+    let recovered: Vec<&HealthRow> = rows.iter().filter(|r| !r.recovery.is_empty()).collect();
+    if !recovered.is_empty() {
+        let won = recovered.iter().filter(|r| r.recovery != "kept").count();
+        out.push(format!(
+            "fit: {} frame(s) needed recovery, {won} recovered by another start: {}",
+            recovered.len(),
+            list(
+                recovered
+                    .iter()
+                    .map(|r| format!("{} ({})", r.frame, r.recovery))
+                    .collect()
+            )
+        ));
+    }
+    let flagged: Vec<&HealthRow> = rows.iter().filter(|r| !r.flags.is_empty()).collect();
+    if !flagged.is_empty() {
+        out.push(format!(
+            "fit: {} frame(s) still look implausible: {}; see fit.csv, `pipeline evaluate` and \
+             README \"Reading the fit's health\"",
+            flagged.len(),
+            list(
+                flagged
+                    .iter()
+                    .map(|r| format!("{} ({})", r.frame, r.flags.replace('+', ", ")))
+                    .collect()
+            )
+        ));
+    }
+    out
 }
 
 /// Parses a diagnostics CSV (the per-frame file or fit.csv): (frame, diagnostics) per row.
@@ -416,6 +462,8 @@ pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitDiagnos
             contact_share: real(contact)?,
             observed: int(observed)?,
             score: real(score)?,
+            unexplained: Default::default(),
+            recovery: None,
         };
         out.push((frame, diagnostics));
     }
@@ -432,6 +480,9 @@ pub struct HealthRow {
     pub iou_worst_camera: String,
     pub iou_median: f64,
     pub joint_motion: f64,
+    pub unexplained_cm2: f64,
+    /// The recovery: empty (not needed), `kept`, or the hypothesis that won.
+    pub recovery: String,
     /// The failed health checks, `+`-joined (empty: none).
     pub flags: String,
 }
@@ -448,7 +499,7 @@ pub fn parse_health(path: &Path, text: &str) -> Result<Vec<HealthRow>> {
         .map(|(i, line)| {
             let bad = || Error::invalid(path, format!("line {}: not a fit.csv row", i + 2));
             let parts: Vec<&str> = line.split(',').collect();
-            let [frame, status, iterations, .., iou_worst, camera, iou_median, motion, flags] =
+            let [frame, status, iterations, .., iou_worst, camera, iou_median, motion, unexplained, recovery, flags] =
                 parts[..]
             else {
                 return Err(bad());
@@ -462,6 +513,8 @@ pub fn parse_health(path: &Path, text: &str) -> Result<Vec<HealthRow>> {
                 iou_worst_camera: camera.to_string(),
                 iou_median: real(iou_median)?,
                 joint_motion: real(motion)?,
+                unexplained_cm2: real(unexplained)?,
+                recovery: recovery.to_string(),
                 flags: flags.to_string(),
             })
         })

@@ -151,6 +151,11 @@ fn bone_defs() -> Vec<BoneDef> {
     defs
 }
 
+/// The humanoid's skeleton at its reference frame (15 bones; `_l`/`_r` sides).
+pub fn skeleton() -> Skeleton {
+    body().skeleton
+}
+
 fn body() -> Body {
     let defs = bone_defs();
     let mut bones: Vec<Bone> = Vec::new();

@@ -1,0 +1,264 @@
+//! Recovery of a tracked frame whose fit lost a part (README "Reading the fit's health"):
+//! when the fitted pose leaves reliable observed surface unexplained, or moves a joint
+//! faster than a body moves, the frame is fitted again from other hypotheses and the
+//! lowest score ([`super::FitDiagnostics::score`], eq. 4 without rho_c) wins.
+//!
+//! The hypotheses, each a start for a full fit:
+//! - **straightened**: every end bone (a hand, a foot, the head: a bone without children)
+//!   back at the reference pose's joint angle. A hand folded back onto its forearm, which
+//!   rho_c then hides, leaves its true surface unexplained; on the humanoid's dance the
+//!   right hand so folded as the arms crossed, 30 cm off for 29 frames.
+//! - **mirrored**: the two limbs of a left/right pair (bones whose names differ only by
+//!   `l`/`r` or `left`/`right`) swap their joint angles, mirrored through the body's
+//!   left-right plane: the limb swaps of fast crossing motion.
+
+use super::pairs::Prepared;
+use super::{FitDiagnostics, FitResult, FitStatus, Fitter, Probe};
+use crate::skeleton::{Pose, Skeleton};
+use nalgebra::{Matrix3, Rotation3, Vector3};
+
+/// A start that recovery tries.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Hypothesis {
+    /// Its name in fit.csv's `recovery` column.
+    pub name: String,
+    pub start: Pose,
+}
+
+impl Fitter<'_> {
+    /// Why `fit` (from the previous frame's `previous`) needs recovery, if it does: the
+    /// unexplained observed surface above `fit.health.unexplained_cm2`, or a joint moved
+    /// farther than the fastest plausible motion allows between two frames.
+    pub(super) fn needs_recovery(&self, fit: &FitResult, previous: &Pose) -> Option<&'static str> {
+        let area = unexplained_cm2(&fit.diagnostics, self.params.sample_spacing);
+        if area >= self.params.health.unexplained_cm2 {
+            return Some("unexplained");
+        }
+        let step = self.max_joint_step?;
+        (super::joint_motion(self.model, previous, &fit.pose) > step).then_some("fast_joint")
+    }
+
+    /// Fits `prepared` again from the most promising recovery hypothesis of `best` and
+    /// keeps the lower score; `diagnostics.recovery` names the hypothesis that won (`kept`
+    /// when none did), and the rounds of every start are counted.
+    ///
+    /// Every hypothesis is screened with [`SCREEN_ROUNDS`] rounds; only the lowest score
+    /// goes on to a full fit. On the humanoid's dance the screen ranked the hypotheses as
+    /// their full fits did, at a third of the rounds.
+    pub(super) fn recover(
+        &self,
+        prepared: &Prepared,
+        best: FitResult,
+        cap: usize,
+        probe: &Probe,
+    ) -> FitResult {
+        let mut best = best;
+        best.diagnostics.recovery = Some("kept".to_string());
+        let screened = hypotheses(&self.model.skeleton, &best.pose)
+            .into_iter()
+            .map(|h| {
+                let mut r = self.fit_prepared(prepared, &h.start, SCREEN_ROUNDS, probe);
+                r.diagnostics.recovery = Some(h.name);
+                r
+            })
+            .reduce(super::tracking::better);
+        let Some(screened) = screened else {
+            return best;
+        };
+        let r = if screened.diagnostics.status == FitStatus::Converged {
+            screened
+        } else {
+            let mut r = self.fit_prepared(prepared, &screened.pose, cap, probe);
+            r.diagnostics.recovery = screened.diagnostics.recovery.clone();
+            r.diagnostics.iterations += screened.diagnostics.iterations;
+            r.diagnostics.lm_steps += screened.diagnostics.lm_steps;
+            r
+        };
+        // `better` counts the rounds of both (the screen's already count every start's).
+        super::tracking::better(best, r)
+    }
+}
+
+/// Rounds each recovery hypothesis is fitted before the most promising one goes on.
+const SCREEN_ROUNDS: usize = 3;
+
+/// The reliable observed surface a fit left unexplained, cm^2: one thinned observed vertex
+/// per `sample_spacing` squared (metres; taken as 1 cm when the observation is not
+/// thinned).
+pub fn unexplained_cm2(diagnostics: &FitDiagnostics, sample_spacing: f64) -> f64 {
+    let spacing_cm = 100.0 * sample_spacing.max(0.01);
+    diagnostics.unexplained.vertices as f64 * spacing_cm * spacing_cm
+}
+
+/// The recovery hypotheses of `pose` ([`Hypothesis`]); none that equals `pose`.
+pub(super) fn hypotheses(skeleton: &Skeleton, pose: &Pose) -> Vec<Hypothesis> {
+    let children = skeleton.children();
+    let mut straightened = pose.clone();
+    for (b, c) in children.iter().enumerate() {
+        if c.is_empty() {
+            straightened.rotations[b] = Rotation3::identity();
+        }
+    }
+    let mut out = Vec::new();
+    if straightened != *pose {
+        out.push(Hypothesis {
+            name: "straightened".to_string(),
+            start: straightened,
+        });
+    }
+    for limb in mirrored_limbs(skeleton) {
+        let mut start = pose.clone();
+        for &(l, r) in &limb.pairs {
+            start.rotations[l] = mirror(&limb.reflection, &pose.rotations[r]);
+            start.rotations[r] = mirror(&limb.reflection, &pose.rotations[l]);
+        }
+        out.push(Hypothesis {
+            name: format!("mirrored {}", limb.name),
+            start,
+        });
+    }
+    out
+}
+
+/// A left/right pair of limbs: the bone pairs of the two subtrees, and the reflection
+/// through the plane between them at the reference frame.
+#[derive(Debug, Clone)]
+struct MirroredLimb {
+    /// The limb's name: its top bone's name without the side.
+    name: String,
+    /// (left bone, right bone), the top pair first.
+    pairs: Vec<(usize, usize)>,
+    /// I - 2 n n^T, n the unit vector between the two top bones' heads.
+    reflection: Matrix3<f64>,
+}
+
+/// The rotation `r` seen in a mirror: `M r M` (a rotation again, as M M = I).
+fn mirror(reflection: &Matrix3<f64>, r: &Rotation3<f64>) -> Rotation3<f64> {
+    Rotation3::from_matrix_unchecked(reflection * r.matrix() * reflection)
+}
+
+/// The name of `name`'s other side, when its name carries one: `_l`/`_r`, `.L`/`.R`,
+/// `left`/`Left` and `right`/`Right` anywhere as a separate token.
+pub fn other_side(name: &str) -> Option<String> {
+    let tokens: Vec<&str> = name.split(['_', '.', '-', ' ']).collect();
+    let swapped: Vec<String> = tokens
+        .iter()
+        .map(|t| match *t {
+            "l" => "r".into(),
+            "r" => "l".into(),
+            "L" => "R".into(),
+            "R" => "L".into(),
+            "left" => "right".into(),
+            "right" => "left".into(),
+            "Left" => "Right".into(),
+            "Right" => "Left".into(),
+            t => t.to_string(),
+        })
+        .collect();
+    if swapped.iter().zip(&tokens).all(|(a, b)| a == b) {
+        return None;
+    }
+    // Rebuild with the original separators.
+    let mut out = String::with_capacity(name.len());
+    let mut rest = name;
+    for (token, new) in tokens.iter().zip(&swapped) {
+        out.push_str(new);
+        rest = &rest[token.len()..];
+        if let Some(sep) = rest.chars().next() {
+            out.push(sep);
+            rest = &rest[sep.len_utf8()..];
+        }
+    }
+    Some(out)
+}
+
+/// Whether `name` is on the left side (its side token is `l`, `L`, `left` or `Left`).
+fn is_left(name: &str) -> bool {
+    name.split(['_', '.', '-', ' '])
+        .any(|t| matches!(t, "l" | "L" | "left" | "Left"))
+}
+
+/// The skeleton's left/right limb pairs: a left bone whose other side exists and whose
+/// parent has no side (or is not paired), with every paired bone below them.
+fn mirrored_limbs(skeleton: &Skeleton) -> Vec<MirroredLimb> {
+    let bones = &skeleton.bones;
+    let partner = |b: usize| other_side(&bones[b].name).and_then(|n| skeleton.bone_index(&n));
+    let children = skeleton.children();
+    let mut limbs = Vec::new();
+    for (l, bone) in bones.iter().enumerate() {
+        let Some(r) = partner(l) else { continue };
+        let parent_paired = bone.parent.is_some_and(|p| partner(p).is_some());
+        if !is_left(&bone.name) || parent_paired {
+            continue;
+        }
+        let across = bones[l].head - bones[r].head;
+        if across.norm() < 1e-9 {
+            continue;
+        }
+        let n: Vector3<f64> = across.normalize();
+        // The two subtrees walked side by side, matching children by their other side.
+        let mut pairs = vec![(l, r)];
+        let mut i = 0;
+        while i < pairs.len() {
+            let (a, b) = pairs[i];
+            for &c in &children[a] {
+                if let Some(d) = partner(c).filter(|d| children[b].contains(d)) {
+                    pairs.push((c, d));
+                }
+            }
+            i += 1;
+        }
+        let name = bone
+            .name
+            .split(['_', '.', '-', ' '])
+            .filter(|t| !matches!(*t, "l" | "L" | "left" | "Left"))
+            .collect::<Vec<_>>()
+            .join("_");
+        limbs.push(MirroredLimb {
+            name,
+            pairs,
+            reflection: Matrix3::identity() - 2.0 * n * n.transpose(),
+        });
+    }
+    limbs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::skeleton::PosedBones;
+
+    #[test]
+    fn sides_are_swapped_token_by_token() {
+        assert_eq!(other_side("upper_arm_l").as_deref(), Some("upper_arm_r"));
+        assert_eq!(other_side("hand.R").as_deref(), Some("hand.L"));
+        assert_eq!(other_side("LeftFoot"), None);
+        assert_eq!(other_side("left_foot").as_deref(), Some("right_foot"));
+        assert_eq!(other_side("spine"), None);
+        assert_eq!(other_side("pelvis_low"), None);
+    }
+
+    /// On a symmetric humanoid, the mirrored arms' hypothesis puts each arm where the
+    /// other was, mirrored: its joints are the mirror images of the other arm's.
+    #[test]
+    fn mirrored_arms_trade_places() {
+        let skeleton = crate::synth::humanoid::skeleton();
+        let mut pose = Pose::rest(skeleton.bones.len());
+        let l = skeleton.bone_index("upper_arm_l").unwrap();
+        let r = skeleton.bone_index("forearm_r").unwrap();
+        pose.rotations[l] = Rotation3::new(Vector3::new(0.3, -0.8, 0.2));
+        pose.rotations[r] = Rotation3::new(Vector3::new(-0.5, 0.1, 0.9));
+        let hypotheses = hypotheses(&skeleton, &pose);
+        let names: Vec<&str> = hypotheses.iter().map(|h| h.name.as_str()).collect();
+        assert_eq!(names, ["mirrored upper_arm", "mirrored thigh"]);
+        let before = PosedBones::new(&skeleton, &pose);
+        let after = PosedBones::new(&skeleton, &hypotheses[0].start);
+        let flip = |v: Vector3<f64>| Vector3::new(-v.x, v.y, v.z);
+        for side in ["upper_arm", "forearm", "hand"] {
+            let a = skeleton.bone_index(&format!("{side}_l")).unwrap();
+            let b = skeleton.bone_index(&format!("{side}_r")).unwrap();
+            assert!((after.tails[a] - flip(before.tails[b])).norm() < 1e-12);
+            assert!((after.tails[b] - flip(before.tails[a])).norm() < 1e-12);
+        }
+    }
+}
