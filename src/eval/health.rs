@@ -33,7 +33,7 @@ pub fn table(rows: &[HealthRow]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "{:>6}  {:>13}  {:>6}  {:>9.3}  {:>10}  {:>10.3}  {:>10.1} cm  {:>7.0} cm2  {:>14}  {}",
+            "{:>6}  {:>13}  {:>6}  {:>9.3}  {:>10}  {:>10.3}  {:>10.1} cm  {:>7} cm2  {:>14}  {}",
             r.frame,
             r.status,
             r.iterations,
@@ -41,7 +41,7 @@ pub fn table(rows: &[HealthRow]) -> String {
             r.iou_worst_camera,
             r.iou_median,
             100.0 * r.joint_motion,
-            r.unexplained_cm2,
+            r.unexplained_cm2.map_or("-".into(), |a| format!("{a:.0}")),
             r.recovery,
             r.flags
         );

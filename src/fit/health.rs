@@ -28,8 +28,9 @@ pub struct Health {
     /// reference frame).
     pub joint_motion: f64,
     /// The reliable observed surface the fit left unexplained, cm^2
-    /// ([`crate::fit::unexplained_cm2`]).
-    pub unexplained_cm2: f64,
+    /// ([`crate::fit::unexplained_cm2`]); `None` where rho_p carries no photo-consistency
+    /// (masks-only captures: the hull's phantom volumes are observed surface there).
+    pub unexplained_cm2: Option<f64>,
 }
 
 /// The body model's mesh coarsened for the silhouette check (vertex clustering on a grid of
@@ -129,7 +130,7 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
         iou_worst_camera,
         iou_median,
         joint_motion,
-        unexplained_cm2: 0.0,
+        unexplained_cm2: None,
     }
 }
 
@@ -155,7 +156,7 @@ pub fn flags(
     if !last.is_empty() && h.iou_worst < p.iou_drop * summarize(last, 0.0).iou_median {
         out.push("iou_drop");
     }
-    if h.unexplained_cm2 >= p.unexplained_cm2 {
+    if h.unexplained_cm2.is_some_and(|a| a >= p.unexplained_cm2) {
         out.push("unexplained");
     }
     out
@@ -216,7 +217,7 @@ mod tests {
         let good = summarize(&[0.95, 0.96], 0.1);
         assert!(flags(&good, &[0.96, 0.95, 0.97], &p, 25.0).is_empty());
         let mut lost = summarize(&[0.7, 0.96], 0.3);
-        lost.unexplained_cm2 = 12.0;
+        lost.unexplained_cm2 = Some(12.0);
         assert_eq!(
             flags(&lost, &[0.96], &p, 25.0),
             ["fast_joint", "iou_drop", "unexplained"]

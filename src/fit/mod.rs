@@ -57,6 +57,10 @@ pub struct Fitter<'a> {
     /// (`fit.health.max_joint_speed` over the frame rate); a tracked fit that moves one
     /// farther is recovered ([`recovery`]). `None`: no such check.
     pub max_joint_step: Option<f64>,
+    /// Whether rho_p measures photo-consistency (false for masks-only captures, whose
+    /// observed surface is the hull with its phantom volumes): only then does unexplained
+    /// observed surface send a frame to recovery.
+    pub photo_consistent: bool,
 }
 
 impl<'a> Fitter<'a> {
@@ -81,6 +85,7 @@ impl<'a> Fitter<'a> {
             sample_normals,
             contact,
             max_joint_step: None,
+            photo_consistent: true,
         }
     }
 

@@ -27,11 +27,12 @@ pub(super) struct Hypothesis {
 
 impl Fitter<'_> {
     /// Why `fit` (from the previous frame's `previous`) needs recovery, if it does: the
-    /// unexplained observed surface above `fit.health.unexplained_cm2`, or a joint moved
+    /// unexplained observed surface above `fit.health.unexplained_cm2` (where rho_p is
+    /// photo-consistency), or a joint moved
     /// farther than the fastest plausible motion allows between two frames.
     pub(super) fn needs_recovery(&self, fit: &FitResult, previous: &Pose) -> Option<&'static str> {
         let area = unexplained_cm2(&fit.diagnostics, self.params.sample_spacing);
-        if area >= self.params.health.unexplained_cm2 {
+        if self.photo_consistent && area >= self.params.health.unexplained_cm2 {
             return Some("unexplained");
         }
         let step = self.max_joint_step?;

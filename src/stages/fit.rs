@@ -126,6 +126,7 @@ pub fn track(
     let seq = ctx.sequence;
     let mut fitter = Fitter::new(model, params.clone());
     fitter.max_joint_step = Some(params.health.max_joint_speed / ctx.config.export.frame_rate);
+    fitter.photo_consistent = seq.has_frames;
     let mut tracker = Tracker::new(fitter);
     for &frame in frames {
         let neighbours = if frame == t0 {
@@ -257,19 +258,23 @@ fn write_frame(
     )?;
     let mesh = model.pose(&result.pose);
     let mut health = frame_health(ctx, model, frame, &result.pose, &coarse.posed(&mesh))?;
-    health.unexplained_cm2 =
-        crate::fit::unexplained_cm2(&result.diagnostics, ctx.config.fit.sample_spacing);
+    health.unexplained_cm2 = ctx
+        .sequence
+        .has_frames
+        .then(|| crate::fit::unexplained_cm2(&result.diagnostics, ctx.config.fit.sample_spacing));
     let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
     let p = &ctx.config.fit.health;
     let flags = crate::fit::health::flags(&health, recent, p, ctx.config.export.frame_rate);
     recent.push(health.iou_worst);
     let diag = format!(
-        "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{:.0},{},{}\n",
+        "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{},{},{}\n",
         diagnostics_row(frame, &result.diagnostics),
         health.iou_worst,
         health.iou_median,
         health.joint_motion,
-        health.unexplained_cm2,
+        health
+            .unexplained_cm2
+            .map_or(String::new(), |a| format!("{a:.0}")),
         result.diagnostics.recovery.as_deref().unwrap_or(""),
         flags.join("+"),
     );
@@ -480,7 +485,8 @@ pub struct HealthRow {
     pub iou_worst_camera: String,
     pub iou_median: f64,
     pub joint_motion: f64,
-    pub unexplained_cm2: f64,
+    /// `None`: not measured (a masks-only capture).
+    pub unexplained_cm2: Option<f64>,
     /// The recovery: empty (not needed), `kept`, or the hypothesis that won.
     pub recovery: String,
     /// The failed health checks, `+`-joined (empty: none).
@@ -513,7 +519,10 @@ pub fn parse_health(path: &Path, text: &str) -> Result<Vec<HealthRow>> {
                 iou_worst_camera: camera.to_string(),
                 iou_median: real(iou_median)?,
                 joint_motion: real(motion)?,
-                unexplained_cm2: real(unexplained)?,
+                unexplained_cm2: match unexplained {
+                    "" => None,
+                    a => Some(real(a)?),
+                },
                 recovery: recovery.to_string(),
                 flags: flags.to_string(),
             })

@@ -418,3 +418,22 @@ pub fn assert_fit_health(dir: &Path) {
         assert!(r.flags.is_empty(), "frame {} flagged {}", r.frame, r.flags);
     }
 }
+
+/// The worst joint error per frame (a bone's head or tail), centimetres, of the run's
+/// `output/joints.csv` in `dir` against the sequence `seq`'s ground truth, in frame order.
+pub fn output_worst_joint_errors_cm(dir: &Path, seq: &str) -> Vec<(u32, f64)> {
+    let truth =
+        hullpose::joints::read(&dir.join(format!("data/{seq}/ground_truth/joints.csv"))).unwrap();
+    let rows = hullpose::joints::read(&dir.join("output/joints.csv")).unwrap();
+    let mut worst: std::collections::BTreeMap<u32, f64> = Default::default();
+    for r in &rows {
+        let t = truth
+            .iter()
+            .find(|t| t.frame == r.frame && t.bone == r.bone)
+            .unwrap();
+        let e = 100.0 * (r.head - t.head).norm().max((r.tail - t.tail).norm());
+        let w = worst.entry(r.frame).or_insert(0.0);
+        *w = w.max(e);
+    }
+    worst.into_iter().collect()
+}
