@@ -52,6 +52,10 @@ enum Command {
         /// step and a 120-degree turn at 25 frames per second, 39 frames).
         #[arg(long, value_enum, default_value = "default")]
         motion: hullpose::synth::Motion,
+        /// The humanoid's body: 0 the standard 1.8 m body, any other number a body drawn
+        /// from it (height within 15%, legs, torso, arms and width each within 7% more).
+        #[arg(long, default_value_t = 0)]
+        body: u64,
     },
     /// Run the pipeline: compute what is stale, reuse what the cache holds.
     Run {
@@ -563,9 +567,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             seed,
             mesh_spacing,
             motion,
+            body,
         } => {
             let mut opts = SynthOptions::new(scene, out);
             opts.motion = motion;
+            if body != 0 {
+                opts.proportions = hullpose::synth::humanoid::Proportions::from_seed(body);
+            }
             opts.cameras = cameras;
             opts.width = width;
             opts.height = height;

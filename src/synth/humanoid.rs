@@ -25,12 +25,70 @@ const CONTACT_GAP: f64 = -0.003;
 /// (name, parent, head, tail, head radius, tail radius, plain material) at the A-pose.
 type BoneDef = (String, Option<String>, [f64; 3], [f64; 3], f64, f64, bool);
 
-fn bone_defs() -> Vec<BoneDef> {
+/// The humanoid's proportions, as factors of the standard body (1.8 m tall): `legs` scales
+/// the hips' height and every leg bone, `torso` the height from the hips to the top of the
+/// head, `arms` every arm bone's length, `width` the shoulders' and hips' spacing and every
+/// radius. The motion (joint angles) is the same for every body.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Proportions {
+    pub legs: f64,
+    pub torso: f64,
+    pub arms: f64,
+    pub width: f64,
+}
+
+impl Default for Proportions {
+    fn default() -> Self {
+        Proportions {
+            legs: 1.0,
+            torso: 1.0,
+            arms: 1.0,
+            width: 1.0,
+        }
+    }
+}
+
+impl Proportions {
+    /// A body drawn from `seed` (`pipeline synth --body SEED`): its height within 15% of
+    /// the standard's, its arms, legs, torso and width each within a further 7%.
+    pub fn from_seed(seed: u64) -> Proportions {
+        let mut rng = super::rng::Rng::new(seed, 9_000_000);
+        let mut uniform = |half: f64| 1.0 + half * (2.0 * rng.uniform() - 1.0);
+        let height = uniform(0.15);
+        Proportions {
+            legs: height * uniform(0.07),
+            torso: height * uniform(0.07),
+            arms: height * uniform(0.07),
+            width: height * uniform(0.07),
+        }
+    }
+}
+
+/// The standard body's hip height, metres: below it `Proportions::legs` applies, above it
+/// `Proportions::torso`.
+const HIP_HEIGHT: f64 = 0.9;
+
+fn bone_defs(p: Proportions) -> Vec<BoneDef> {
     let a = std::f64::consts::FRAC_1_SQRT_2;
+    // A standard body's point in this body: heights below the hips by the legs' factor,
+    // above them by the torso's, sideways by the width.
+    let place = |q: [f64; 3]| -> [f64; 3] {
+        let z = if q[2] <= HIP_HEIGHT {
+            q[2] * p.legs
+        } else {
+            HIP_HEIGHT * p.legs + (q[2] - HIP_HEIGHT) * p.torso
+        };
+        [q[0] * p.width, q[1] * p.width, z]
+    };
+    // Arm bones from the shoulder along the A-pose's 45 degrees, `from` and `len` in the
+    // standard arm's metres.
     let arm = |s: f64, from: f64, len: f64| -> ([f64; 3], [f64; 3]) {
-        let (x0, z0) = (0.19 + from * a, 1.40 - from * a);
+        let shoulder = place([0.19, 0.0, 1.40]);
+        let (x0, z0) = (shoulder[0] + from * p.arms * a, shoulder[2] - from * p.arms * a);
+        let len = len * p.arms;
         ([s * x0, 0.0, z0], [s * (x0 + len * a), 0.0, z0 - len * a])
     };
+    // Leg and torso points go through `place`; arm points are placed already.
     let def = |name: &str,
                parent: Option<&str>,
                h: [f64; 3],
@@ -39,13 +97,15 @@ fn bone_defs() -> Vec<BoneDef> {
                r1: f64,
                plain: bool|
      -> BoneDef {
+        let placed = name.contains("arm") || name.starts_with("hand");
+        let (h, t) = if placed { (h, t) } else { (place(h), place(t)) };
         (
             name.to_string(),
             parent.map(str::to_string),
             h,
             t,
-            r0,
-            r1,
+            r0 * p.width,
+            r1 * p.width,
             plain,
         )
     };
@@ -151,13 +211,13 @@ fn bone_defs() -> Vec<BoneDef> {
     defs
 }
 
-/// The humanoid's skeleton at its reference frame (15 bones; `_l`/`_r` sides).
+/// The standard humanoid's skeleton at its reference frame (17 bones; `_l`/`_r` sides).
 pub fn skeleton() -> Skeleton {
-    body().skeleton
+    body(Proportions::default()).skeleton
 }
 
-fn body() -> Body {
-    let defs = bone_defs();
+fn body(proportions: Proportions) -> Body {
+    let defs = bone_defs(proportions);
     let mut bones: Vec<Bone> = Vec::new();
     for (name, parent, head, tail, ..) in &defs {
         let parent = parent.as_ref().map(|p| {
@@ -388,8 +448,9 @@ pub fn scene(
     frames: usize,
     seed: u64,
     motion: super::Motion,
+    proportions: Proportions,
 ) -> Scene {
-    let body = body();
+    let body = body(proportions);
     let bone = |n: &str| body.skeleton.bone_index(n).expect("known bone");
     let (a, hips, cross, knee, step) = (
         a_pose(&body),

@@ -82,6 +82,8 @@ pub struct SynthOptions {
     pub first_frame: usize,
     /// The humanoid's motion.
     pub motion: Motion,
+    /// The humanoid's proportions (`--body SEED`: [`humanoid::Proportions::from_seed`]).
+    pub proportions: humanoid::Proportions,
 }
 
 impl SynthOptions {
@@ -98,6 +100,7 @@ impl SynthOptions {
             mesh_spacing: 0.01,
             first_frame: 0,
             motion: Motion::Default,
+            proportions: Default::default(),
         }
     }
 }
@@ -120,6 +123,10 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     if opts.frames == Some(0) {
         return Err(Error::Usage("--frames must be at least 1".into()));
     }
+    if opts.proportions != humanoid::Proportions::default() && opts.scene != SceneKind::Humanoid
+    {
+        return Err(Error::Usage("--body needs --scene humanoid".into()));
+    }
     if opts.motion == Motion::Dance && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--motion dance needs --scene humanoid".into()));
     }
@@ -138,6 +145,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
             opts.frames.unwrap_or(key_frames(opts).0),
             opts.seed,
             opts.motion,
+            opts.proportions,
         ),
     })
 }
