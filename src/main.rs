@@ -193,6 +193,25 @@ enum Command {
         /// The pipeline.yaml naming the calibration and the sequence.
         file: PathBuf,
     },
+    /// Make the sequence's skeleton.yaml: reconstruct the reference frame and embed a
+    /// template skeleton in its surface (bones along the medial axis, the template's
+    /// proportions). Writes output/skeleton/bones.ply and output/skeleton/overlay.png to
+    /// check it. Needs export.up_axis in pipeline.yaml.
+    Skeleton {
+        /// The pipeline.yaml naming the calibration and the sequence.
+        file: PathBuf,
+        /// `humanoid` (the built-in 17-bone body) or a skeleton.yaml to use as a template
+        /// (its bones, names and proportions; its size and place do not matter).
+        #[arg(long, default_value = "humanoid")]
+        template: String,
+        /// The reference frame (default: the first frame of pipeline.yaml's range). Choose
+        /// one where the arms and legs stand clear of the body.
+        #[arg(long)]
+        frame: Option<u32>,
+        /// Replace an existing skeleton.yaml.
+        #[arg(long)]
+        force: bool,
+    },
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -621,6 +640,34 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "wrote {} cameras to {}",
                 imported.cameras.len(),
                 out.display()
+            );
+        }
+        Command::Skeleton {
+            file,
+            template,
+            frame,
+            force,
+        } => {
+            let job = Job::load(Config::load(&file)?, None)?;
+            let template = hullpose::autoskeleton::Template::parse(&template);
+            let w = hullpose::autoskeleton::make(&job, &template, frame, force)?;
+            println!(
+                "embedded {} bones in frame {} in {:.2} s",
+                w.skeleton_value.bones.len(),
+                w.frame,
+                w.embed_seconds
+            );
+            for bone in &w.skeleton_value.bones {
+                println!("  {:<14} {:>6.1} cm", bone.name, 100.0 * bone.length());
+            }
+            println!("wrote {}", w.skeleton.display());
+            println!(
+                "wrote {} (open it with the reference frame's mesh in MeshLab or Blender)",
+                w.bones_ply.display()
+            );
+            println!(
+                "wrote {} (the skeleton on the reference frame in every camera)",
+                w.overlay.display()
             );
         }
         Command::Check { file } => {

@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
+pub mod embed;
 pub mod model;
 pub mod pose;
 pub mod skinning;

@@ -84,7 +84,10 @@ fn bone_defs(p: Proportions) -> Vec<BoneDef> {
     // standard arm's metres.
     let arm = |s: f64, from: f64, len: f64| -> ([f64; 3], [f64; 3]) {
         let shoulder = place([0.19, 0.0, 1.40]);
-        let (x0, z0) = (shoulder[0] + from * p.arms * a, shoulder[2] - from * p.arms * a);
+        let (x0, z0) = (
+            shoulder[0] + from * p.arms * a,
+            shoulder[2] - from * p.arms * a,
+        );
         let len = len * p.arms;
         ([s * x0, 0.0, z0], [s * (x0 + len * a), 0.0, z0 - len * a])
     };

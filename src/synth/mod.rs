@@ -123,8 +123,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     if opts.frames == Some(0) {
         return Err(Error::Usage("--frames must be at least 1".into()));
     }
-    if opts.proportions != humanoid::Proportions::default() && opts.scene != SceneKind::Humanoid
-    {
+    if opts.proportions != humanoid::Proportions::default() && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--body needs --scene humanoid".into()));
     }
     if opts.motion == Motion::Dance && opts.scene != SceneKind::Humanoid {

@@ -1,0 +1,757 @@
+//! An automatic skeleton (`pipeline skeleton`): a template skeleton scaled, turned and
+//! embedded in the reference frame's closed surface, in the spirit of Pinocchio (Baran and
+//! Popović 2007): bones along the surface's medial axis, lengths and offsets near the
+//! template's.
+//!
+//! 1. The surface is voxelized (1 cm, or coarser for big subjects) and its interior depth
+//!    D (the distance to the surface, positive inside) taken by an exact distance
+//!    transform. The medial axis is where D is largest across a part.
+//! 2. **Placement.** The template, with the world's up axis kept, is scaled so that its
+//!    joints span [`JOINT_SPAN`] of the surface's height, centred on the interior, and
+//!    turned so that its left-right axis (from its `_l`/`_r` bone pairs) lies along the
+//!    interior's widest horizontal axis; both facings and five scales are tried, and the
+//!    deepest placement (mean D along the bones) wins.
+//! 3. **Limbs.** Each limb (a left/right pair's top bone with everything below it) is
+//!    swung about its root joint in the frontal plane, from -60 to +60 degrees, to its
+//!    deepest angle: an A-pose template finds the arms of a T-pose.
+//! 4. **Refinement.** Every joint moves by gradient descent on the negated mean depth
+//!    along the bones (each point's depth capped a little above the bone's start depth,
+//!    so that a bone is drawn onto its own part's axis and not into a thicker neighbour),
+//!    plus priors: within each chain (an unbranched run of bones) the template's length
+//!    proportions, the chain's length near the placement's scale (weakly), a head apart
+//!    from its parent's tail (a shoulder, a hip) at its template offset, and each end
+//!    bone's tail about its part's radius short of the part's end (a capsule's cap).
+//! 5. **Checks.** A bone whose points are not inside, a hand or foot whose tail lies as
+//!    deep as the torso (a limb fused to the body), left and right limbs whose lengths
+//!    differ by more than [`LIMB_ASYMMETRY`], or more than [`UNCOVERED_SHARE`] of the
+//!    surface far from every bone (a limb the template could not follow: hands on the
+//!    hips, crossed forearms) refuse the embedding with a message.
+
+use super::{Bone, Skeleton};
+use crate::geometry::grid::GridSpec;
+use crate::geometry::TriMesh;
+use nalgebra::{Rotation3, Vector2, Vector3};
+
+/// The template's joints span this share of the body's height (the feet's joints lie a few
+/// centimetres above the floor, the head's tail a few below its top; the built-in
+/// humanoid: 1.685 of 1.815 m).
+pub const JOINT_SPAN: f64 = 0.93;
+
+/// The template's lowest joint lies this share of the body's height above its lowest point
+/// (the toes' joints above the soles; the built-in humanoid: 3.5 of 181.5 cm).
+pub const FOOT_MARGIN: f64 = 0.02;
+
+/// Refusal: left and right limbs whose lengths differ by more than this share.
+pub const LIMB_ASYMMETRY: f64 = 0.2;
+
+/// Weights of the refinement's terms (step 4 of the module's notes): bone lengths within
+/// their chain, each chain's length against the placement's scale, heads apart from their
+/// parent's tail, and the end bones' reach.
+const LENGTH_WEIGHT: f64 = 0.02;
+const CHAIN_WEIGHT: f64 = 0.002;
+const OFFSET_WEIGHT: f64 = 0.01;
+const REACH_WEIGHT: f64 = 2.0;
+
+/// The depth cap of the limbs' swing, metres: thinner than any limb.
+const SWING_CAP: f64 = 0.015;
+
+/// The refinement caps each bone's depth at this times its mean depth at the start (at
+/// least [`SWING_CAP`]): a bone is drawn onto its own part's axis, not into a thicker
+/// neighbour.
+const REFINE_CAP: f64 = 1.25;
+
+/// Gradient steps of the refinement at most.
+const REFINE_ITERATIONS: usize = 2000;
+
+/// Points sampled along each bone.
+const SAMPLES: usize = 8;
+
+/// The finest voxel and the most voxels along the longest side.
+const FINEST_VOXEL: f64 = 0.01;
+const MOST_VOXELS: f64 = 300.0;
+
+/// The surface's interior as a depth field, in the frame where up is +z.
+struct Interior {
+    grid: GridSpec,
+    /// Depth at voxel centres, metres: positive inside, negative outside.
+    depth: Vec<f32>,
+}
+
+impl Interior {
+    fn new(surface: &TriMesh) -> Result<Interior, String> {
+        let (mut lo, mut hi) = (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        );
+        for v in &surface.vertices {
+            lo = lo.inf(v);
+            hi = hi.sup(v);
+        }
+        if surface.triangles.is_empty() || !(hi - lo).iter().all(|e| e.is_finite() && *e > 0.0) {
+            return Err("the reference surface is empty".into());
+        }
+        let voxel = FINEST_VOXEL.max((hi - lo).max() / MOST_VOXELS);
+        let margin = Vector3::repeat(3.0 * voxel);
+        let grid = GridSpec::covering(lo - margin, hi + margin, voxel);
+        let occupied = occupancy(&grid, surface);
+        if !occupied.iter().any(|&o| o) {
+            return Err("the reference surface encloses no volume".into());
+        }
+        let depth = crate::geometry::distance::signed_distance(&grid, &occupied)
+            .into_iter()
+            .map(|d| -d)
+            .collect();
+        Ok(Interior { grid, depth })
+    }
+
+    /// D at `p`, metres (trilinear; far outside beyond the grid).
+    fn at(&self, p: &Vector3<f64>) -> f64 {
+        self.grid.interpolate(&self.depth, p, -1.0) as f64
+    }
+
+    /// The centres of the voxels at least one voxel deep.
+    fn inside_points(&self) -> Vec<Vector3<f64>> {
+        let g = &self.grid;
+        (0..g.len())
+            .filter(|&i| self.depth[i] as f64 >= g.voxel)
+            .map(|i| {
+                let [x, y, z] = g.coords(i);
+                g.centre(x, y, z)
+            })
+            .collect()
+    }
+}
+
+/// Voxels whose centre lies inside the closed `surface`: along each vertical column of
+/// centres, the surface's crossings are collected and the centres between the first and
+/// second, third and fourth, ... are inside (even-odd rule).
+fn occupancy(grid: &GridSpec, surface: &TriMesh) -> Vec<bool> {
+    let [nx, ny, nz] = grid.dims;
+    let mut crossings: Vec<Vec<f64>> = vec![Vec::new(); nx * ny];
+    // Column centres nudged off the lattice, so that no column passes exactly through an
+    // edge or a vertex of the (often grid-aligned) surface.
+    let nudge = Vector2::new(0.5 + 1.3e-4, 0.5 + 2.9e-4);
+    let column = |i: f64, j: f64| {
+        Vector2::new(
+            grid.origin.x + (i + nudge.x) * grid.voxel,
+            grid.origin.y + (j + nudge.y) * grid.voxel,
+        )
+    };
+    for t in &surface.triangles {
+        let [a, b, c] = t.map(|i| surface.vertices[i as usize]);
+        let (pa, pb, pc) = (a.xy(), b.xy(), c.xy());
+        let area = (pb - pa).perp(&(pc - pa));
+        if area.abs() < 1e-18 {
+            continue;
+        }
+        let lo = pa.inf(&pb).inf(&pc);
+        let hi = pa.sup(&pb).sup(&pc);
+        let to_index = |v: f64, o: f64, n: f64| ((v - o) / grid.voxel - n).floor();
+        let i0 = to_index(lo.x, grid.origin.x, nudge.x).max(0.0) as usize;
+        let j0 = to_index(lo.y, grid.origin.y, nudge.y).max(0.0) as usize;
+        let i1 = (to_index(hi.x, grid.origin.x, nudge.x) + 1.0).min(nx as f64 - 1.0);
+        let j1 = (to_index(hi.y, grid.origin.y, nudge.y) + 1.0).min(ny as f64 - 1.0);
+        if i1 < 0.0 || j1 < 0.0 {
+            continue;
+        }
+        for j in j0..=j1 as usize {
+            for i in i0..=i1 as usize {
+                let q = column(i as f64, j as f64);
+                let wa = (pb - q).perp(&(pc - q)) / area;
+                let wb = (pc - q).perp(&(pa - q)) / area;
+                let wc = 1.0 - wa - wb;
+                if wa >= 0.0 && wb >= 0.0 && wc >= 0.0 {
+                    crossings[j * nx + i].push(wa * a.z + wb * b.z + wc * c.z);
+                }
+            }
+        }
+    }
+    let mut occupied = vec![false; grid.len()];
+    for (col, zs) in crossings.iter_mut().enumerate() {
+        zs.sort_by(f64::total_cmp);
+        let (i, j) = (col % nx, col / nx);
+        for pair in zs.chunks_exact(2) {
+            for k in 0..nz {
+                let z = grid.origin.z + (k as f64 + 0.5) * grid.voxel;
+                if z > pair[0] && z < pair[1] {
+                    occupied[grid.index(i, j, k)] = true;
+                }
+            }
+        }
+    }
+    occupied
+}
+
+/// A skeleton as points: each bone's head and tail are indices into the points (a child
+/// whose head is its parent's tail shares that point).
+#[derive(Clone)]
+struct Joints {
+    points: Vec<Vector3<f64>>,
+    /// (head, tail) per bone.
+    ends: Vec<(usize, usize)>,
+}
+
+impl Joints {
+    fn of(bones: &[Bone]) -> Joints {
+        let mut points: Vec<Vector3<f64>> = Vec::new();
+        let mut index = |p: Vector3<f64>| match points.iter().position(|q| (q - p).norm() < 1e-6) {
+            Some(i) => i,
+            None => {
+                points.push(p);
+                points.len() - 1
+            }
+        };
+        let ends = bones
+            .iter()
+            .map(|b| (index(b.head), index(b.tail)))
+            .collect();
+        Joints { points, ends }
+    }
+
+    fn bone(&self, b: usize) -> (Vector3<f64>, Vector3<f64>) {
+        (self.points[self.ends[b].0], self.points[self.ends[b].1])
+    }
+
+    /// Mean depth along bone `b`, each point's depth capped at `cap` metres (outside
+    /// counts five times: bones must stay inside).
+    fn bone_depth(&self, interior: &Interior, b: usize, cap: f64) -> f64 {
+        let (h, t) = self.bone(b);
+        (0..SAMPLES)
+            .map(|k| {
+                let d = interior.at(&(h + (t - h) * ((k as f64 + 0.5) / SAMPLES as f64)));
+                if d < 0.0 {
+                    5.0 * d
+                } else {
+                    d.min(cap)
+                }
+            })
+            .sum::<f64>()
+            / SAMPLES as f64
+    }
+
+    /// The sum of the bones' mean depths (bone b's capped at `caps[b]`), each weighted by
+    /// its template length share.
+    fn depth(&self, interior: &Interior, weights: &[f64], caps: &[f64]) -> f64 {
+        (0..self.ends.len())
+            .map(|b| weights[b] * self.bone_depth(interior, b, caps[b]))
+            .sum()
+    }
+}
+
+/// Embeds `template` in the closed `surface` (world metres) whose up direction is `up`;
+/// the result keeps the template's bones, names, parents and `reference_frame`. Refuses,
+/// with a message naming the problem, a surface it cannot embed the template in.
+pub fn embed(template: &Skeleton, surface: &TriMesh, up: Vector3<f64>) -> Result<Skeleton, String> {
+    if template.bones.is_empty() {
+        return Err("the template has no bones".into());
+    }
+    let to_z = Rotation3::rotation_between(&up.normalize(), &Vector3::z())
+        .unwrap_or_else(|| Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+    let local = TriMesh {
+        vertices: surface.vertices.iter().map(|v| to_z * v).collect(),
+        triangles: surface.triangles.clone(),
+    };
+    let interior = Interior::new(&local)?;
+    let bones: Vec<Bone> = template
+        .bones
+        .iter()
+        .map(|b| Bone {
+            head: to_z * b.head,
+            tail: to_z * b.tail,
+            ..b.clone()
+        })
+        .collect();
+    let tpl = Joints::of(&bones);
+    let lengths: Vec<f64> = bones.iter().map(|b| b.length()).collect();
+    let total: f64 = lengths.iter().sum::<f64>().max(1e-9);
+    let weights: Vec<f64> = lengths.iter().map(|l| l / total).collect();
+
+    let (placed, scale) = place(&interior, template, &tpl, &weights)?;
+    let swung = swing_limbs(&interior, template, placed, &weights);
+    let refined = refine(&interior, template, &tpl, swung, scale, &weights);
+    check(&interior, template, &refined)?;
+    check_coverage(&interior, template, &refined, &local)?;
+    let from_z = to_z.inverse();
+    Ok(Skeleton {
+        reference_frame: template.reference_frame,
+        bones: template
+            .bones
+            .iter()
+            .enumerate()
+            .map(|(b, bone)| {
+                let (h, t) = refined.bone(b);
+                Bone {
+                    head: from_z * h,
+                    tail: from_z * t,
+                    ..bone.clone()
+                }
+            })
+            .collect(),
+    })
+}
+
+/// The template's left-right axis in its horizontal plane (left minus right heads of its
+/// pairs), if it has pairs.
+fn left_right_axis(template: &Skeleton, tpl: &Joints) -> Option<Vector2<f64>> {
+    let mut sum = Vector2::zeros();
+    for (l, bone) in template.bones.iter().enumerate() {
+        let Some(r) = crate::fit::other_side(&bone.name).and_then(|n| template.bone_index(&n))
+        else {
+            continue;
+        };
+        if bone
+            .name
+            .split(['_', '.', '-', ' '])
+            .any(|t| matches!(t, "l" | "L" | "left" | "Left"))
+        {
+            sum += (tpl.bone(l).0 - tpl.bone(r).0).xy();
+        }
+    }
+    (sum.norm() > 1e-9).then(|| sum.normalize())
+}
+
+/// Step 2: the template scaled, turned and moved into the interior; the deepest of the
+/// tried placements, and its scale.
+fn place(
+    interior: &Interior,
+    template: &Skeleton,
+    tpl: &Joints,
+    weights: &[f64],
+) -> Result<(Joints, f64), String> {
+    let inside = interior.inside_points();
+    if inside.len() < 10 {
+        return Err("the reference surface is too thin to hold a skeleton".into());
+    }
+    let n = inside.len() as f64;
+    let centre = inside.iter().sum::<Vector3<f64>>() / n;
+    let (zmin, zmax) = inside
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.z), b.max(p.z))
+        });
+    // The widest horizontal axis of the interior.
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in &inside {
+        let d = p - centre;
+        sxx += d.x * d.x;
+        sxy += d.x * d.y;
+        syy += d.y * d.y;
+    }
+    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let widest = Vector2::new(angle.cos(), angle.sin());
+    let template_axis = left_right_axis(template, tpl).unwrap_or_else(Vector2::x);
+    let (tzmin, tzmax) = tpl
+        .points
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.z), b.max(p.z))
+        });
+    if tzmax - tzmin < 1e-6 {
+        return Err(
+            "the template's joints all lie at one height: is its up axis the capture's?".into(),
+        );
+    }
+    let template_centre = tpl.points.iter().sum::<Vector3<f64>>() / tpl.points.len() as f64;
+    // The surface's interior spans about a voxel less than the body at each end.
+    let height = zmax - zmin + interior.grid.voxel;
+    let s0 = JOINT_SPAN * height / (tzmax - tzmin);
+    let mut best: Option<(f64, Joints, f64)> = None;
+    for facing in [widest, -widest] {
+        let yaw = facing.y.atan2(facing.x) - template_axis.y.atan2(template_axis.x);
+        let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
+        for factor in [0.92, 0.96, 1.0, 1.04, 1.08] {
+            let s = s0 * factor;
+            // The lowest joint just above the interior's bottom.
+            let floor = zmin - 0.5 * interior.grid.voxel + FOOT_MARGIN * height;
+            let points = tpl
+                .points
+                .iter()
+                .map(|p| {
+                    let mut d = p - template_centre;
+                    d.z = p.z - tzmin;
+                    let q = turn * (d * s);
+                    Vector3::new(centre.x + q.x, centre.y + q.y, floor + q.z)
+                })
+                .collect();
+            let joints = Joints {
+                points,
+                ends: tpl.ends.clone(),
+            };
+            let depth = joints.depth(interior, weights, &vec![f64::INFINITY; weights.len()]);
+            if best.as_ref().is_none_or(|b| depth > b.0) {
+                best = Some((depth, joints, s));
+            }
+        }
+    }
+    let (_, joints, s) = best.expect("placements were tried");
+    Ok((joints, s))
+}
+
+/// The limbs: each left/right pair's top bone (a paired bone whose parent is not paired)
+/// with the bones below it.
+fn limbs(template: &Skeleton) -> Vec<Vec<usize>> {
+    let children = template.children();
+    let paired = |b: usize| {
+        crate::fit::other_side(&template.bones[b].name)
+            .and_then(|n| template.bone_index(&n))
+            .is_some()
+    };
+    (0..template.bones.len())
+        .filter(|&b| paired(b) && template.bones[b].parent.is_none_or(|p| !paired(p)))
+        .map(|top| {
+            let mut limb = vec![top];
+            let mut i = 0;
+            while i < limb.len() {
+                limb.extend(children[limb[i]].iter().copied());
+                i += 1;
+            }
+            limb
+        })
+        .collect()
+}
+
+/// Step 3: each limb swung about its root joint in the frontal plane to its deepest angle.
+fn swing_limbs(
+    interior: &Interior,
+    template: &Skeleton,
+    mut joints: Joints,
+    weights: &[f64],
+) -> Joints {
+    let centre = joints.points.iter().sum::<Vector3<f64>>() / joints.points.len() as f64;
+    for limb in limbs(template) {
+        let root = joints.ends[limb[0]].0;
+        let pivot = joints.points[root];
+        // The frontal plane's normal: horizontal, across the line from the body's centre to
+        // the limb's root.
+        let out = pivot - centre;
+        let axis = Vector3::new(-out.y, out.x, 0.0);
+        if axis.norm() < 1e-9 {
+            continue;
+        }
+        let axis = nalgebra::Unit::new_normalize(axis);
+        let moved: Vec<usize> = {
+            let mut m: Vec<usize> = limb
+                .iter()
+                .flat_map(|&b| [joints.ends[b].0, joints.ends[b].1])
+                .filter(|&p| p != root)
+                .collect();
+            m.sort_unstable();
+            m.dedup();
+            m
+        };
+        let original = joints.clone();
+        // Depth capped at SWING_CAP: a limb is as good anywhere it lies wholly inside
+        // (uncapped, it would dive into the thicker torso); the smallest swing wins a tie.
+        let limb_depth = |j: &Joints| {
+            limb.iter()
+                .map(|&b| weights[b] * j.bone_depth(interior, b, SWING_CAP))
+                .sum::<f64>()
+        };
+        let mut best = (limb_depth(&joints), 0.0);
+        for step in [1, -1, 2, -2, 3, -3, 4, -4, 5, -5, 6, -6] {
+            let angle = (10.0 * step as f64).to_radians();
+            let turn = Rotation3::from_axis_angle(&axis, angle);
+            let mut trial = original.clone();
+            for &p in &moved {
+                trial.points[p] = pivot + turn * (original.points[p] - pivot);
+            }
+            let d = limb_depth(&trial);
+            if d > best.0 * (1.0 + 1e-3) + 1e-9 {
+                best = (d, angle);
+            }
+        }
+        let turn = Rotation3::from_axis_angle(&axis, best.1);
+        for &p in &moved {
+            joints.points[p] = pivot + turn * (original.points[p] - pivot);
+        }
+    }
+    joints
+}
+
+/// Step 4: gradient descent on the joints' positions.
+fn refine(
+    interior: &Interior,
+    template: &Skeleton,
+    tpl: &Joints,
+    start: Joints,
+    scale: f64,
+    weights: &[f64],
+) -> Joints {
+    // Template offsets of each head from its parent's head, scaled and turned as the
+    // placement turned the body (the yaw between the template's left-right axis and the
+    // start's).
+    let yaw = {
+        let a = left_right_axis(template, tpl).unwrap_or_else(Vector2::x);
+        let b = left_right_axis(template, &start).unwrap_or(a);
+        b.y.atan2(b.x) - a.y.atan2(a.x)
+    };
+    let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
+    let offsets: Vec<Option<Vector3<f64>>> = template
+        .bones
+        .iter()
+        .enumerate()
+        .map(|(b, bone)| {
+            // Only a head apart from its parent's tail (a shoulder, a hip) gets the prior:
+            // a connected head follows its parent's bone.
+            bone.parent
+                .filter(|&p| tpl.ends[b].0 != tpl.ends[p].1)
+                .map(|p| turn * ((tpl.bone(b).0 - tpl.bone(p).0) * scale))
+        })
+        .collect();
+    let lengths: Vec<f64> = (0..tpl.ends.len())
+        .map(|b| {
+            let (h, t) = tpl.bone(b);
+            ((t - h).norm() * scale).max(1e-6)
+        })
+        .collect();
+    let chains = chains(template);
+    let children = template.children();
+    let caps: Vec<f64> = (0..start.ends.len())
+        .map(|b| (REFINE_CAP * start.bone_depth(interior, b, f64::INFINITY)).max(SWING_CAP))
+        .collect();
+    let energy = |j: &Joints| -> f64 {
+        let mut e = -j.depth(interior, weights, &caps);
+        let length = |b: usize| {
+            let (h, t) = j.bone(b);
+            (t - h).norm()
+        };
+        // Within a chain, the bones keep the template's proportions; the chain's own
+        // length is free but for a weak pull to the placement's scale.
+        for chain in &chains {
+            let ratio = chain.iter().map(|&b| length(b)).sum::<f64>()
+                / chain.iter().map(|&b| lengths[b]).sum::<f64>();
+            e += CHAIN_WEIGHT * (ratio - 1.0).powi(2);
+            for &b in chain {
+                e += LENGTH_WEIGHT * (length(b) / (ratio * lengths[b]) - 1.0).powi(2);
+            }
+        }
+        for b in 0..j.ends.len() {
+            let (h, t) = j.bone(b);
+            if children[b].is_empty() {
+                e += REACH_WEIGHT * reach_error(interior, &h, &t).powi(2);
+            }
+            if let (Some(o), Some(p)) = (offsets[b], template.bones[b].parent) {
+                let d = (h - j.bone(p).0) - o;
+                e += OFFSET_WEIGHT * d.norm_squared() / (o.norm() + 0.05).powi(2);
+            }
+        }
+        e
+    };
+    let mut joints = start;
+    let mut e = energy(&joints);
+    let mut step = 0.005;
+    let h = 1e-3;
+    for _ in 0..REFINE_ITERATIONS {
+        // Numerical gradient, point by point.
+        let mut grad = vec![Vector3::zeros(); joints.points.len()];
+        for (i, g) in grad.iter_mut().enumerate() {
+            for a in 0..3 {
+                let mut j = joints.clone();
+                j.points[i][a] += h;
+                let up = energy(&j);
+                j.points[i][a] -= 2.0 * h;
+                let down = energy(&j);
+                g[a] = (up - down) / (2.0 * h);
+            }
+        }
+        let norm = grad.iter().map(|g| g.norm_squared()).sum::<f64>().sqrt();
+        if norm < 1e-12 {
+            break;
+        }
+        // A step of at most `step` metres for the fastest point; halved until it helps.
+        let largest = grad.iter().map(|g| g.norm()).fold(0.0, f64::max);
+        let mut improved = false;
+        while step > 1e-5 {
+            let mut trial = joints.clone();
+            for (p, g) in trial.points.iter_mut().zip(&grad) {
+                *p -= g * (step / largest);
+            }
+            let et = energy(&trial);
+            if et < e {
+                (joints, e) = (trial, et);
+                step *= 1.5;
+                improved = true;
+                break;
+            }
+            step *= 0.5;
+        }
+        if !improved {
+            break;
+        }
+        step = step.min(0.02);
+    }
+    joints
+}
+
+/// The chains: maximal runs of bones each the only child of the one before (a bone whose
+/// parent has several children, or none, starts a chain).
+fn chains(template: &Skeleton) -> Vec<Vec<usize>> {
+    let children = template.children();
+    let starts = (0..template.bones.len()).filter(|&b| {
+        template.bones[b]
+            .parent
+            .is_none_or(|p| children[p].len() != 1)
+    });
+    starts
+        .map(|start| {
+            let mut chain = vec![start];
+            while let [only] = children[*chain.last().expect("not empty")][..] {
+                chain.push(only);
+            }
+            chain
+        })
+        .collect()
+}
+
+/// How far an end bone's tail `t` (head `h`) misses the end of its part, metres: a part
+/// ends about its radius beyond the tail, along the bone (a capsule's cap), the radius
+/// taken as the depth three quarters along the bone (the tail's own depth would let a tail
+/// sitting on the surface pass). The surface beyond the tail is found by marching in
+/// half-voxel steps, then interpolated, so that the measure moves smoothly with the tail.
+fn reach_error(interior: &Interior, h: &Vector3<f64>, t: &Vector3<f64>) -> f64 {
+    let u = (t - h).normalize();
+    if !u.iter().all(|x| x.is_finite()) {
+        return 0.0;
+    }
+    let radius = interior.at(&(h + (t - h) * 0.75)).max(0.0);
+    let depth = interior.at(t);
+    if depth <= 0.0 {
+        return depth - radius;
+    }
+    let step = 0.5 * interior.grid.voxel;
+    let (mut s, mut before) = (0.0, depth);
+    while s < 0.5 {
+        let d = interior.at(&(t + u * (s + step)));
+        if d <= 0.0 {
+            let beyond = s + step * before / (before - d);
+            return beyond - radius;
+        }
+        (s, before) = (s + step, d);
+    }
+    s - radius
+}
+
+/// Refusal: the share of the surface's vertices farther than [`UNCOVERED_EXCESS`] beyond
+/// the part their nearest bone stands for may not exceed [`UNCOVERED_SHARE`].
+pub const UNCOVERED_SHARE: f64 = 0.08;
+/// How far a surface vertex may lie beyond its nearest bone's part (the distance to the
+/// bone less the depth there, the part's radius), metres.
+pub const UNCOVERED_EXCESS: f64 = 0.05;
+
+/// Step 5, the surface's side: every part of the surface has a bone inside it. A limb the
+/// template could not follow (bent onto the body, crossed) leaves its surface far from
+/// every bone.
+fn check_coverage(
+    interior: &Interior,
+    template: &Skeleton,
+    joints: &Joints,
+    surface: &TriMesh,
+) -> Result<(), String> {
+    let mut uncovered = vec![0usize; template.bones.len()];
+    let mut total = 0usize;
+    for v in surface.vertices.iter().step_by(7) {
+        total += 1;
+        let (mut best, mut best_bone) = (f64::INFINITY, 0);
+        for b in 0..template.bones.len() {
+            let (h, t) = joints.bone(b);
+            let d = t - h;
+            let s = ((v - h).dot(&d) / d.norm_squared().max(1e-18)).clamp(0.0, 1.0);
+            let p = h + d * s;
+            let excess = (v - p).norm() - interior.at(&p).max(0.0);
+            if excess < best {
+                (best, best_bone) = (excess, b);
+            }
+        }
+        if best > UNCOVERED_EXCESS {
+            uncovered[best_bone] += 1;
+        }
+    }
+    let n: usize = uncovered.iter().sum();
+    if total > 0 && n as f64 > UNCOVERED_SHARE * total as f64 {
+        let worst = (0..uncovered.len())
+            .max_by_key(|&b| uncovered[b])
+            .unwrap_or(0);
+        return Err(format!(
+            "{:.0}% of the surface lies far from every bone (most of it nearest '{}'): the body \
+             is not in a pose the template can be embedded in (limbs bent onto the body or \
+             crossed); choose a reference frame where the arms and legs stand clear of the \
+             torso (an A-pose or T-pose) with --frame",
+            100.0 * n as f64 / total as f64,
+            template.bones[worst].name
+        ));
+    }
+    Ok(())
+}
+
+/// Step 5: the refusals.
+fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<(), String> {
+    for (b, bone) in template.bones.iter().enumerate() {
+        let (h, t) = joints.bone(b);
+        let inside = [0.25, 0.5, 0.75]
+            .iter()
+            .filter(|&&s| interior.at(&(h + (t - h) * s)) > 0.0)
+            .count();
+        if inside < 2 {
+            return Err(format!(
+                "bone '{}' could not be placed inside the surface: is the reference frame's \
+                 surface complete, and the template a skeleton of this kind of body?",
+                bone.name
+            ));
+        }
+    }
+    // The torso's depth: the deepest point along the bones that are not in a limb.
+    let in_limb: Vec<usize> = limbs(template).into_iter().flatten().collect();
+    let torso_depth = (0..template.bones.len())
+        .filter(|b| !in_limb.contains(b))
+        .map(|b| {
+            let (h, t) = joints.bone(b);
+            (0..=SAMPLES)
+                .map(|k| interior.at(&(h + (t - h) * (k as f64 / SAMPLES as f64))))
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max);
+    let children = template.children();
+    for &b in &in_limb {
+        if !children[b].is_empty() {
+            continue;
+        }
+        let tail = joints.points[joints.ends[b].1];
+        if torso_depth > 0.0 && interior.at(&tail) > 0.6 * torso_depth {
+            return Err(format!(
+                "the end of '{}' lies as deep inside the body as the torso: the limb seems \
+                 fused to the body at the reference frame; choose a reference frame where \
+                 the arms and legs stand clear of the torso (an A-pose or T-pose)",
+                template.bones[b].name
+            ));
+        }
+    }
+    // Left and right limbs of about one length.
+    let limb_length = |limb: &[usize]| -> f64 {
+        limb.iter()
+            .map(|&b| {
+                let (h, t) = joints.bone(b);
+                (t - h).norm()
+            })
+            .sum()
+    };
+    for limb in limbs(template) {
+        let name = &template.bones[limb[0]].name;
+        let Some(other) = crate::fit::other_side(name).and_then(|n| template.bone_index(&n)) else {
+            continue;
+        };
+        let Some(other_limb) = limbs(template).into_iter().find(|l| l[0] == other) else {
+            continue;
+        };
+        let (a, b) = (limb_length(&limb), limb_length(&other_limb));
+        if (a - b).abs() > LIMB_ASYMMETRY * a.max(b) {
+            return Err(format!(
+                "the limbs '{name}' and '{}' came out {:.0} and {:.0} cm long: one of them \
+                 could not be followed (touching another part, or cut off in the surface)",
+                template.bones[other].name,
+                100.0 * a,
+                100.0 * b
+            ));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,103 @@
+//! `pipeline skeleton`: the built-in humanoid template embedded in the reference frame's
+//! surface, on synthetic humanoids of three different bodies (height within 15%, limbs
+//! within 7% more) at 12 and 8 cameras, against the generator's true skeleton; tracking
+//! from the automatic skeleton; and the refusals.
+
+mod common;
+
+use common::*;
+use hullpose::skeleton::Skeleton;
+use hullpose::synth::humanoid::Proportions;
+use hullpose::synth::{SceneKind, SynthOptions};
+use std::path::Path;
+
+/// Generates the humanoid `body` seen by `cameras` at 640x480 (`frames` frames of its
+/// motion; `None`: all), moves its skeleton.yaml away and returns the true skeleton.
+fn capture(d: &Path, body: u64, cameras: usize, frames: Option<usize>) -> Skeleton {
+    let mut options = SynthOptions::new(SceneKind::Humanoid, d);
+    (options.cameras, options.width, options.height) = (cameras, 640, 480);
+    options.frames = frames;
+    options.seed = body;
+    options.proportions = Proportions::from_seed(body);
+    hullpose::synth::generate(&options).unwrap();
+    let path = d.join("data/humanoid/skeleton.yaml");
+    let truth = Skeleton::read(&path).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    truth
+}
+
+/// Mean and worst joint distance (heads and tails), centimetres.
+fn joint_errors(a: &Skeleton, b: &Skeleton) -> (f64, f64) {
+    let d: Vec<f64> = a
+        .bones
+        .iter()
+        .zip(&b.bones)
+        .flat_map(|(x, y)| [(x.head - y.head).norm(), (x.tail - y.tail).norm()])
+        .map(|e| 100.0 * e)
+        .collect();
+    (
+        d.iter().sum::<f64>() / d.len() as f64,
+        d.iter().fold(0.0, |m, &e| m.max(e)),
+    )
+}
+
+#[test]
+fn three_bodies_at_twelve_and_eight_cameras_are_embedded_within_three_centimetres() {
+    for cameras in [12, 8] {
+        for body in 1..=3 {
+            let dir = process_tempdir();
+            let d = dir.path();
+            let truth = capture(d, body, cameras, Some(1));
+            let (ok, out, err) = run_cli(&["skeleton", "pipeline.yaml"], d);
+            assert!(ok, "body {body}, {cameras} cameras: {err}");
+            assert!(out.contains("embedded 17 bones in frame 0"), "{out}");
+            let made = Skeleton::read(&d.join("data/humanoid/skeleton.yaml")).unwrap();
+            let (mean, worst) = joint_errors(&made, &truth);
+            eprintln!("body {body}, {cameras} cameras: mean {mean:.2} cm, worst {worst:.2} cm");
+            assert!(
+                mean <= 3.0 && worst <= 6.0,
+                "body {body}, {cameras} cameras: {mean:.2} / {worst:.2}"
+            );
+            assert!(d.join("output/skeleton/bones.ply").is_file());
+            assert!(d.join("output/skeleton/overlay.png").is_file());
+        }
+    }
+}
+
+#[test]
+fn tracking_from_the_automatic_skeleton_stays_within_two_and_a_half_centimetres() {
+    let dir = process_tempdir();
+    let d = dir.path();
+    capture(d, 2, 8, None);
+    let yaml = std::fs::read_to_string(d.join("pipeline.yaml")).unwrap();
+    std::fs::write(
+        d.join("pipeline.yaml"),
+        yaml.replace("frames: all", "frames: 0..8"),
+    )
+    .unwrap();
+    let (ok, _, err) = run_cli(&["skeleton", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    let made = std::fs::read(d.join("data/humanoid/skeleton.yaml")).unwrap();
+
+    // A reference frame with the hands on the hips is refused, and leaves skeleton.yaml
+    // as it was; an existing skeleton.yaml is replaced only with --force.
+    let (ok, _, err) = run_cli(&["skeleton", "pipeline.yaml", "--frame", "4"], d);
+    assert!(!ok && err.contains("--force"), "{err}");
+    let (ok, _, err) = run_cli(&["skeleton", "pipeline.yaml", "--frame", "4", "--force"], d);
+    assert!(!ok, "{err}");
+    assert!(
+        err.contains("not in a pose the template can be embedded in"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(d.join("data/humanoid/skeleton.yaml")).unwrap(),
+        made
+    );
+
+    let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    let errors = output_joint_errors_cm(d, "humanoid");
+    eprintln!("from the automatic skeleton, mean joint error per frame (cm): {errors:.2?}");
+    assert_eq!(errors.len(), 9);
+    assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
+}
