@@ -31,6 +31,11 @@ pub struct Health {
     /// ([`crate::fit::unexplained_cm2`]); `None` where rho_p carries no photo-consistency
     /// (masks-only captures: the hull's phantom volumes are observed surface there).
     pub unexplained_cm2: Option<f64>,
+    /// The deepest overlap of two parts that do not meet, beyond the reference pose's,
+    /// metres (0: none; [`crate::fit::interpenetration`]).
+    pub interpenetration: f64,
+    /// Eq. 4 against the previous tracked frame's (0: unknown).
+    pub energy_ratio: f64,
 }
 
 /// The body model's mesh coarsened for the silhouette check (vertex clustering on a grid of
@@ -131,6 +136,8 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
         iou_median,
         joint_motion,
         unexplained_cm2: None,
+        interpenetration: 0.0,
+        energy_ratio: 0.0,
     }
 }
 
@@ -141,7 +148,9 @@ const RECENT_FRAMES: usize = 5;
 /// faster than `p.max_joint_speed` at `frame_rate`, `iou_drop` when the worst IoU fell below
 /// `p.iou_drop` times the median of `recent` (the previous frames' worst IoU, oldest first;
 /// only its last [`RECENT_FRAMES`] count), `unexplained` when the fit left at least
-/// `p.unexplained_cm2` of reliable observed surface unexplained.
+/// `p.unexplained_cm2` of reliable observed surface unexplained, `interpenetration` when two
+/// parts overlap deeper than `p.interpenetration_cm`, `energy_jump` when eq. 4 rose more
+/// than `p.energy_jump` times the previous frame's.
 pub fn flags(
     h: &Health,
     recent: &[f64],
@@ -158,6 +167,12 @@ pub fn flags(
     }
     if h.unexplained_cm2.is_some_and(|a| a >= p.unexplained_cm2) {
         out.push("unexplained");
+    }
+    if 100.0 * h.interpenetration >= p.interpenetration_cm {
+        out.push("interpenetration");
+    }
+    if h.energy_ratio > p.energy_jump {
+        out.push("energy_jump");
     }
     out
 }
@@ -218,11 +233,22 @@ mod tests {
         assert!(flags(&good, &[0.96, 0.95, 0.97], &p, 25.0).is_empty());
         let mut lost = summarize(&[0.7, 0.96], 0.3);
         lost.unexplained_cm2 = Some(12.0);
+        lost.interpenetration = 0.08;
+        lost.energy_ratio = 4.0;
         assert_eq!(
             flags(&lost, &[0.96], &p, 25.0),
-            ["fast_joint", "iou_drop", "unexplained"]
+            [
+                "fast_joint",
+                "iou_drop",
+                "unexplained",
+                "interpenetration",
+                "energy_jump"
+            ]
         );
-        assert_eq!(flags(&lost, &[], &p, 10.0), ["unexplained"]);
+        assert_eq!(
+            flags(&lost, &[], &p, 10.0),
+            ["unexplained", "interpenetration", "energy_jump"]
+        );
         let h = summarize(&[0.9, 0.5, 0.8, 0.95], 0.02);
         assert_eq!((h.iou_worst, h.iou_worst_camera), (0.5, 1));
         assert!((h.iou_median - 0.85).abs() < 1e-12);

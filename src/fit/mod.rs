@@ -19,6 +19,7 @@ mod anderson;
 pub mod contact;
 mod descent;
 pub mod health;
+pub mod interpenetration;
 pub mod kept_nearest;
 mod moments;
 pub mod pairs;
@@ -61,6 +62,8 @@ pub struct Fitter<'a> {
     /// observed surface is the hull with its phantom volumes): only then does unexplained
     /// observed surface send a frame to recovery.
     pub photo_consistent: bool,
+    /// The parts as capsules, for the interpenetration check ([`interpenetration`]).
+    pub capsules: interpenetration::Capsules,
 }
 
 impl<'a> Fitter<'a> {
@@ -78,6 +81,7 @@ impl<'a> Fitter<'a> {
         };
         let sample_normals = keep.iter().map(|&i| normals[i]).collect();
         let contact = ContactSearch::new(&sample, params.contact);
+        let capsules = interpenetration::Capsules::new(model);
         Fitter {
             model,
             params,
@@ -86,6 +90,7 @@ impl<'a> Fitter<'a> {
             contact,
             max_joint_step: None,
             photo_consistent: true,
+            capsules,
         }
     }
 

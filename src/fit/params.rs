@@ -160,6 +160,15 @@ pub struct HealthParams {
     /// least 0.5) farther than 3 cm from the model, cm^2. Default 8 (a fit from the true
     /// pose leaves 0-2 on the humanoid's dance, a hand folded back 9-18).
     pub unexplained_cm2: f64,
+    /// A frame is flagged, and recovered, when two parts that do not meet at a joint overlap
+    /// deeper than this (their flesh as capsules, beyond their overlap at the reference
+    /// pose; `interpenetration.rs`), cm. Default 6 (the dance's true poses reach 3.8 where a
+    /// hand presses on the other forearm).
+    pub interpenetration_cm: f64,
+    /// A frame is flagged when its eq. 4 energy is more than this times the larger of the
+    /// two previous tracked frames'. Default 10 (on a masks-only capture, where the hull's
+    /// phantom volumes are observed surface, eq. 4 varies by 3x between good frames).
+    pub energy_jump: f64,
 }
 
 impl Default for HealthParams {
@@ -168,6 +177,8 @@ impl Default for HealthParams {
             max_joint_speed: 6.0,
             iou_drop: 0.9,
             unexplained_cm2: 8.0,
+            interpenetration_cm: 6.0,
+            energy_jump: 10.0,
         }
     }
 }
@@ -261,10 +272,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
             h.max_joint_speed, h.iou_drop
         ));
     }
-    if !positive(h.unexplained_cm2) {
+    let energy_jump_ok = h.energy_jump.is_finite() && h.energy_jump >= 1.0;
+    if !(positive(h.unexplained_cm2) && positive(h.interpenetration_cm) && energy_jump_ok) {
         return Err(format!(
-            "fit.health.unexplained_cm2 must be a positive area in cm^2, got {}",
-            h.unexplained_cm2
+            "fit.health: unexplained_cm2 must be a positive area in cm^2, interpenetration_cm a \
+             positive depth in cm and energy_jump a ratio >= 1, got {}, {} and {}",
+            h.unexplained_cm2, h.interpenetration_cm, h.energy_jump
         ));
     }
     let r = &p.restart;

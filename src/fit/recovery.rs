@@ -28,12 +28,20 @@ pub(super) struct Hypothesis {
 impl Fitter<'_> {
     /// Why `fit` (from the previous frame's `previous`) needs recovery, if it does: the
     /// unexplained observed surface above `fit.health.unexplained_cm2` (where rho_p is
-    /// photo-consistency), or a joint moved
+    /// photo-consistency), two parts overlapping deeper than
+    /// `fit.health.interpenetration_cm`, or a joint moved
     /// farther than the fastest plausible motion allows between two frames.
     pub(super) fn needs_recovery(&self, fit: &FitResult, previous: &Pose) -> Option<&'static str> {
         let area = unexplained_cm2(&fit.diagnostics, self.params.sample_spacing);
         if self.photo_consistent && area >= self.params.health.unexplained_cm2 {
             return Some("unexplained");
+        }
+        let overlap = self
+            .capsules
+            .deepest(self.model, &fit.pose)
+            .map_or(0.0, |x| x.2);
+        if 100.0 * overlap >= self.params.health.interpenetration_cm {
+            return Some("interpenetration");
         }
         let step = self.max_joint_step?;
         (super::joint_motion(self.model, previous, &fit.pose) > step).then_some("fast_joint")

@@ -212,9 +212,14 @@ pub(super) fn compute(
 ) -> Result<()> {
     let model = super::model::load(ctx)?;
     let probe = Probe::default();
-    let coarse = crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL);
-    // The worst silhouette IoU of the frames fitted so far, in tracking order.
+    let checks = HealthChecks {
+        coarse: crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL),
+        capsules: crate::fit::interpenetration::Capsules::new(&model),
+    };
+    // The worst silhouette IoU of the frames fitted so far, in tracking order, and their
+    // eq. 4 energies.
     let mut recent: Vec<f64> = Vec::new();
+    let mut energies: std::collections::HashMap<u32, f64> = Default::default();
     track(
         ctx,
         &model,
@@ -224,7 +229,34 @@ pub(super) fn compute(
         &mut |frame, result, secs| {
             // The run keeps no round log: dropped frame by frame, so it never grows.
             probe.take_rounds();
-            let out = write_frame(ctx, &model, &coarse, &mut recent, frame, result)?;
+            // The larger eq. 4 of the two previous tracked frames: a frame near the
+            // reference pose, which the model fits almost exactly, is a poor yardstick (as
+            // for the restarts, `Tracker::fit`).
+            let t0 = model.skeleton.reference_frame;
+            let seq = ctx.sequence;
+            let mut previous_energy: Option<f64> = None;
+            let mut at = frame;
+            for _ in 0..2 {
+                let Some(p) = seq.tracked_previous(at, t0) else {
+                    break;
+                };
+                let e = match energies.get(&p) {
+                    Some(&e) => e,
+                    None => cached_diagnostics(ctx, p)?.energy,
+                };
+                previous_energy = Some(previous_energy.map_or(e, |x| x.max(e)));
+                at = p;
+            }
+            energies.insert(frame, result.diagnostics.energy);
+            let out = write_frame(
+                ctx,
+                &model,
+                &checks,
+                &mut recent,
+                previous_energy,
+                frame,
+                result,
+            )?;
             commit(frame, out, secs)
         },
     )
@@ -233,13 +265,23 @@ pub(super) fn compute(
 /// Cell of the coarse model the fit's health is measured with, metres.
 const HEALTH_CELL: f64 = 0.02;
 
+/// What the health checks measure a fitted pose with: the model coarsened for the
+/// silhouettes, and its parts as capsules.
+struct HealthChecks {
+    coarse: crate::fit::health::CoarseModel,
+    capsules: crate::fit::interpenetration::Capsules,
+}
+
 /// Writes a frame's artifacts; `recent` holds the worst silhouette IoU of the frames fitted
-/// before it in this run (its health checks compare against them), and gets its own.
+/// before it in this run (its health checks compare against them), and gets its own;
+/// `previous_energy` is the larger eq. 4 of the two previous tracked frames (none at the
+/// reference frame).
 fn write_frame(
     ctx: &Context,
     model: &BodyModel,
-    coarse: &crate::fit::health::CoarseModel,
+    checks: &HealthChecks,
     recent: &mut Vec<f64>,
+    previous_energy: Option<f64>,
     frame: u32,
     result: &FitResult,
 ) -> Result<Output> {
@@ -257,7 +299,14 @@ fn write_frame(
         &joint_rows(skeleton, frame, &result.pose),
     )?;
     let mesh = model.pose(&result.pose);
-    let mut health = frame_health(ctx, model, frame, &result.pose, &coarse.posed(&mesh))?;
+    let mut health = frame_health(ctx, model, frame, &result.pose, &checks.coarse.posed(&mesh))?;
+    health.interpenetration = checks
+        .capsules
+        .deepest(model, &result.pose)
+        .map_or(0.0, |x| x.2);
+    health.energy_ratio = previous_energy
+        .filter(|&e| e > 0.0)
+        .map_or(0.0, |e| result.diagnostics.energy / e);
     health.unexplained_cm2 = ctx
         .sequence
         .has_frames

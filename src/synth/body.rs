@@ -8,7 +8,7 @@
 
 use crate::geometry::isosurface::{self, ScalarGrid};
 use crate::geometry::TriMesh;
-pub use crate::skeleton::skinning::segment_distance;
+pub use crate::skeleton::skinning::{segment_distance, segment_segment};
 use crate::skeleton::Skeleton;
 use nalgebra::{Rotation3, Vector3};
 
@@ -208,46 +208,5 @@ impl Body {
         let ra = self.radii[a].0 + s * (self.radii[a].1 - self.radii[a].0);
         let rb = self.radii[b].0 + t * (self.radii[b].1 - self.radii[b].0);
         d - ra - rb
-    }
-}
-
-/// Closest points of segments p0-p1 and q0-q1: parameters (s, t) in [0, 1] and distance.
-pub fn segment_segment(
-    p0: &Vector3<f64>,
-    p1: &Vector3<f64>,
-    q0: &Vector3<f64>,
-    q1: &Vector3<f64>,
-) -> (f64, f64, f64) {
-    // Dense sampling of one parameter, exact projection for the other, then refinement:
-    // robust for parallel segments and plenty fast for scene setup.
-    let dist = |s: f64| {
-        let p = p0 + s * (p1 - p0);
-        let (t, d) = segment_distance(&p, q0, q1);
-        (t, d)
-    };
-    let mut best = (0.0, 0.0, f64::INFINITY);
-    for i in 0..=200 {
-        let s = i as f64 / 200.0;
-        let (t, d) = dist(s);
-        if d < best.2 {
-            best = (s, t, d);
-        }
-    }
-    let (mut lo, mut hi) = ((best.0 - 0.005f64).max(0.0), (best.0 + 0.005f64).min(1.0));
-    for _ in 0..60 {
-        let m1 = lo + (hi - lo) / 3.0;
-        let m2 = hi - (hi - lo) / 3.0;
-        if dist(m1).1 < dist(m2).1 {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
-    }
-    let s = 0.5 * (lo + hi);
-    let (t, d) = dist(s);
-    if d < best.2 {
-        (s, t, d)
-    } else {
-        best
     }
 }
