@@ -234,7 +234,7 @@ mod tests {
         let mut lost = summarize(&[0.7, 0.96], 0.3);
         lost.unexplained_cm2 = Some(12.0);
         lost.interpenetration = 0.08;
-        lost.energy_ratio = 4.0;
+        lost.energy_ratio = 12.0;
         assert_eq!(
             flags(&lost, &[0.96], &p, 25.0),
             [
