@@ -389,7 +389,8 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
                 seconds: 0.0,
                 location: job.cache.stage_dir(stage.name),
                 warnings: vec![format!(
-                    "{}: the sequence has no skeleton.yaml, so there is no body model or motion",
+                    "{}: the sequence has no skeleton.yaml, so there is no body model or motion \
+                     (make one with `pipeline skeleton FILE`)",
                     stage.name
                 )],
                 outputs: Vec::new(),

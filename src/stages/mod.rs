@@ -418,7 +418,7 @@ pub fn plan_notes(ctx: &Context) -> Result<Vec<String>> {
     let fit = if skeleton {
         "from skeleton.yaml at the reference frame"
     } else {
-        "skipped: no skeleton.yaml"
+        "skipped: no skeleton.yaml (make one with `pipeline skeleton`)"
     };
     Ok(vec![
         format!("silhouette: {silhouette}"),
