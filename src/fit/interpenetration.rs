@@ -95,17 +95,10 @@ mod tests {
     /// reference pose does not count.
     #[test]
     fn a_forearm_pushed_into_the_chest_overlaps() {
-        let mut options = crate::synth::SynthOptions::new(crate::synth::SceneKind::Humanoid, ".");
-        (
-            options.cameras,
-            options.width,
-            options.height,
-            options.frames,
-        ) = (2, 32, 24, Some(1));
-        let scene = crate::synth::build_scene(&options).unwrap();
-        let mesh = scene.body.rest_mesh(0.02);
+        let body = crate::synth::humanoid::standard_body();
+        let mesh = body.rest_mesh(0.02);
         let model = crate::stages::model::build(
-            &scene.body.skeleton,
+            &body.skeleton,
             &mesh,
             &crate::stages::model::ModelParams::default(),
         )

@@ -182,10 +182,14 @@ pub fn other_side(name: &str) -> Option<String> {
     Some(out)
 }
 
+/// Whether `token` names the left side.
+fn is_left_token(token: &str) -> bool {
+    matches!(token, "l" | "L" | "left" | "Left")
+}
+
 /// Whether `name` is on the left side (its side token is `l`, `L`, `left` or `Left`).
-fn is_left(name: &str) -> bool {
-    name.split(['_', '.', '-', ' '])
-        .any(|t| matches!(t, "l" | "L" | "left" | "Left"))
+pub fn is_left(name: &str) -> bool {
+    name.split(['_', '.', '-', ' ']).any(is_left_token)
 }
 
 /// The skeleton's left/right limb pairs: a left bone whose other side exists and whose
@@ -221,7 +225,7 @@ fn mirrored_limbs(skeleton: &Skeleton) -> Vec<MirroredLimb> {
         let name = bone
             .name
             .split(['_', '.', '-', ' '])
-            .filter(|t| !matches!(*t, "l" | "L" | "left" | "Left"))
+            .filter(|t| !is_left_token(t))
             .collect::<Vec<_>>()
             .join("_");
         limbs.push(MirroredLimb {

@@ -301,11 +301,7 @@ fn left_right_axis(template: &Skeleton, tpl: &Joints) -> Option<Vector2<f64>> {
         else {
             continue;
         };
-        if bone
-            .name
-            .split(['_', '.', '-', ' '])
-            .any(|t| matches!(t, "l" | "L" | "left" | "Left"))
-        {
+        if crate::fit::is_left(&bone.name) {
             sum += (tpl.bone(l).0 - tpl.bone(r).0).xy();
         }
     }
@@ -358,6 +354,7 @@ fn place(
     // of the skeleton lies inside), the scale nearest the height's winning ties:
     // uncapped, a scale that lifts the chest into a T-pose's wide shoulders would win.
     let caps = vec![SWING_CAP; weights.len()];
+    let limbs = limbs(template);
     // The surface's interior spans about a voxel less than the body at each end.
     let height = zmax - zmin + interior.grid.voxel;
     let s0 = JOINT_SPAN * height / (tzmax - tzmin);
@@ -385,7 +382,7 @@ fn place(
             };
             // Each placement's limbs swung first (step 3): limbs the template holds
             // differently would otherwise steer the choice.
-            let joints = swing_limbs(interior, template, joints, weights);
+            let joints = swing_limbs(interior, &limbs, joints, weights);
             let depth = joints.depth(interior, weights, &caps);
             if best
                 .as_ref()
@@ -422,15 +419,16 @@ fn limbs(template: &Skeleton) -> Vec<Vec<usize>> {
         .collect()
 }
 
-/// Step 3: each limb swung about its root joint in the frontal plane to its deepest angle.
+/// Step 3: each of the `limbs` ([`limbs`]) swung about its root joint in the frontal
+/// plane to its deepest angle.
 fn swing_limbs(
     interior: &Interior,
-    template: &Skeleton,
+    limbs: &[Vec<usize>],
     mut joints: Joints,
     weights: &[f64],
 ) -> Joints {
     let centre = joints.points.iter().sum::<Vector3<f64>>() / joints.points.len() as f64;
-    for limb in limbs(template) {
+    for limb in limbs {
         let root = joints.ends[limb[0]].0;
         let pivot = joints.points[root];
         // The frontal plane's normal: horizontal, across the line from the body's centre to
@@ -712,7 +710,8 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
         }
     }
     // The torso's depth: the deepest point along the bones that are not in a limb.
-    let in_limb: Vec<usize> = limbs(template).into_iter().flatten().collect();
+    let limbs = limbs(template);
+    let in_limb: Vec<usize> = limbs.iter().flatten().copied().collect();
     let torso_depth = (0..template.bones.len())
         .filter(|b| !in_limb.contains(b))
         .map(|b| {
@@ -746,15 +745,15 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
             })
             .sum()
     };
-    for limb in limbs(template) {
+    for limb in &limbs {
         let name = &template.bones[limb[0]].name;
         let Some(other) = crate::fit::other_side(name).and_then(|n| template.bone_index(&n)) else {
             continue;
         };
-        let Some(other_limb) = limbs(template).into_iter().find(|l| l[0] == other) else {
+        let Some(other_limb) = limbs.iter().find(|l| l[0] == other) else {
             continue;
         };
-        let (a, b) = (limb_length(&limb), limb_length(&other_limb));
+        let (a, b) = (limb_length(limb), limb_length(other_limb));
         if (a - b).abs() > LIMB_ASYMMETRY * a.max(b) {
             return Err(format!(
                 "the limbs '{name}' and '{}' came out {:.0} and {:.0} cm long: one of them \
@@ -777,15 +776,8 @@ mod tests {
     /// swings its arms up to them (step 3) and lands within 3 cm on average, 6 cm at worst.
     #[test]
     fn an_a_pose_template_finds_the_arms_of_a_t_pose() {
-        let mut options = crate::synth::SynthOptions::new(crate::synth::SceneKind::Humanoid, ".");
-        (
-            options.cameras,
-            options.width,
-            options.height,
-            options.frames,
-        ) = (2, 32, 24, Some(1));
-        let scene = crate::synth::build_scene(&options).unwrap();
-        let b = &scene.body;
+        let body = crate::synth::humanoid::standard_body();
+        let b = &body;
         let rest = b.rest_mesh(0.01);
         let weights = b.skin_weights(&rest, 0.025);
         let mut pose = body::Pose::rest(b.skeleton.bones.len());

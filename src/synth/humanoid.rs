@@ -216,7 +216,12 @@ fn bone_defs(p: Proportions) -> Vec<BoneDef> {
 
 /// The standard humanoid's skeleton at its reference frame (17 bones; `_l`/`_r` sides).
 pub fn skeleton() -> Skeleton {
-    body(Proportions::default()).skeleton
+    standard_body().skeleton
+}
+
+/// The standard humanoid's body (1.8 m, A-pose at rest).
+pub fn standard_body() -> Body {
+    body(Proportions::default())
 }
 
 fn body(proportions: Proportions) -> Body {
