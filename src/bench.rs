@@ -171,11 +171,11 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         &mut timings,
     );
     let t_refine = t.elapsed().as_secs_f64();
-    let (t_cones, cones) = best_of(1, || {
-        crate::stages::visual_hull::cones(cams, &masks, &job.config.visual_hull, &grid)
-    });
+    let (t_band, hull_on_cones) =
+        best_of(1, || crate::stages::load_hull_on_cones(&ctx, frame, &sdf));
+    let hull_on_cones = hull_on_cones?;
     let (t_mesh, _) = best_of(1, || {
-        gc::mesh(&grid, &refined, &sdf, &cones, p.smoothing_iterations)
+        gc::mesh(&grid, &refined, &hull_on_cones, p.smoothing_iterations)
     });
     Ok(format!(
         "graph cut, frame {frame}: {} band voxels\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n{:>28} {:>9.1} ms\n",
@@ -186,7 +186,7 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         "photo-consistency", timings.photo * 1e3,
         "graph and max-flow", timings.cut * 1e3,
         "refine total", t_refine * 1e3,
-        "silhouette cones", t_cones * 1e3,
+        "hull on the cones (band)", t_band * 1e3,
         "mesh", t_mesh * 1e3,
     ))
 }

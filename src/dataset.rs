@@ -320,7 +320,7 @@ impl Sequence {
     }
 
     fn load_rgb(&self, cam: usize, path: &Path) -> Result<RgbImage> {
-        let img = decode(path, Some(&self.cameras[cam]))?.to_rgb8();
+        let img = decode(path, Some(&self.cameras[cam]))?.into_rgb8();
         Ok(img)
     }
 
@@ -331,7 +331,7 @@ impl Sequence {
             let mask = self
                 .load_mask(cam, frame)?
                 .expect("a masks-only capture has masks");
-            return Ok(image::DynamicImage::ImageLuma8(mask).to_rgb8());
+            return Ok(image::DynamicImage::ImageLuma8(mask).into_rgb8());
         }
         self.load_rgb(cam, &self.frame_path(cam, frame))
     }

@@ -360,58 +360,79 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     let _lock = job.cache.lock_frames(&touched)?;
     job.cache.sweep_temporaries();
     let keys = job.keys(reference)?;
-    let ctx = job.context();
+    let ctx = job.context().sharing_frame_images();
+    let run = StageRun {
+        job,
+        ctx: &ctx,
+        keys: &keys,
+        reference,
+    };
     let mut reports = Vec::new();
-    for (stage, forced) in plan {
-        let start = Instant::now();
-        let frames = job.stage_frames(stage, reference);
-        if stage.scope == Scope::Sequence {
-            let finished = match stage.finish {
-                Some(finish) => finish(&ctx, &frames)?,
-                None => Default::default(),
-            };
-            reports.push(StageReport {
-                stage: stage.name,
-                computed: finished.files,
-                reused: 0,
-                seconds: start.elapsed().as_secs_f64(),
-                location: job.config.output.clone(),
-                warnings: finished.warnings,
-                outputs: finished.outputs,
-            });
-            continue;
+    let mut i = 0;
+    while i < plan.len() {
+        if is_per_frame(plan[i].0) {
+            // Consecutive per-frame stages run frame by frame.
+            let end = (i..plan.len())
+                .find(|&j| !is_per_frame(plan[j].0))
+                .unwrap_or(plan.len());
+            reports.extend(run.per_frame(&plan[i..end])?);
+            i = end;
+        } else {
+            reports.push(run.stage(plan[i].0, plan[i].1)?);
+            i += 1;
         }
-        if stage.scope != Scope::PerFrame && frames.is_empty() {
-            reports.push(StageReport {
-                stage: stage.name,
-                computed: 0,
-                reused: 0,
-                seconds: 0.0,
-                location: job.cache.stage_dir(stage.name),
-                warnings: vec![format!(
-                    "{}: the sequence has no skeleton.yaml, so there is no body model or motion \
-                     (make one with `pipeline skeleton FILE`)",
-                    stage.name
-                )],
-                outputs: Vec::new(),
-            });
-            continue;
-        }
+    }
+    Ok(reports)
+}
+
+/// Whether a stage makes one artifact per frame, each from that frame alone.
+fn is_per_frame(stage: &StageDef) -> bool {
+    stage.scope == Scope::PerFrame
+        && matches!(stage.compute, Compute::Frame(_))
+        && stage.finish.is_none()
+}
+
+/// A frame's artifact computed by a stage: its warnings and the seconds it took.
+type Computed = (Vec<String>, f64);
+
+/// What every stage of a run shares.
+struct StageRun<'a> {
+    job: &'a Job,
+    ctx: &'a Context<'a>,
+    keys: &'a HashMap<(&'static str, u32), String>,
+    reference: Option<u32>,
+}
+
+/// A stage's frames in a run, and which of them it computes.
+struct Pending {
+    frames: Vec<u32>,
+    todo: Vec<u32>,
+    /// Notes on artifacts found damaged (they are recomputed).
+    damaged: Vec<String>,
+}
+
+impl StageRun<'_> {
+    fn pending(&self, stage: &StageDef, forced: bool) -> Pending {
+        let frames = self.job.stage_frames(stage, self.reference);
         let states: Vec<ArtifactState> = if forced {
             vec![ArtifactState::Stale; frames.len()]
         } else {
             frames
                 .iter()
-                .map(|&f| job.cache.state(stage.name, f, &keys[&(stage.name, f)]))
+                .map(|&f| {
+                    self.job
+                        .cache
+                        .state(stage.name, f, &self.keys[&(stage.name, f)])
+                })
                 .collect()
         };
-        let todo: Vec<u32> = frames
+        let todo = frames
             .iter()
             .zip(&states)
             .filter(|(_, &s)| s != ArtifactState::UpToDate)
             .map(|(&f, _)| f)
             .collect();
-        let damaged: Vec<String> = frames
+        let damaged = frames
             .iter()
             .zip(&states)
             .filter(|(_, &s)| s == ArtifactState::Damaged)
@@ -420,26 +441,177 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
                 stage.name
             ))
             .collect();
-        let progress = bar(todo.len(), stage.name);
+        Pending {
+            frames,
+            todo,
+            damaged,
+        }
+    }
+
+    /// Records a computed artifact in the cache.
+    fn commit(&self, stage: &StageDef, f: u32, files: Vec<String>, seconds: f64) -> Result<()> {
+        self.job.cache.commit(&Manifest {
+            stage: stage.name.to_string(),
+            frame: f,
+            key: self.keys[&(stage.name, f)].clone(),
+            format_version: stage.format_version,
+            files,
+            seconds,
+            digests: Vec::new(),
+        })
+    }
+
+    /// The report of a stage that computed `pending.todo` in `seconds`.
+    fn report(
+        &self,
+        stage: &StageDef,
+        pending: Pending,
+        seconds: f64,
+        warnings: Vec<Vec<String>>,
+        outputs: Vec<std::path::PathBuf>,
+    ) -> StageReport {
+        // A note every frame gives alike is said once.
+        let mut seen = std::collections::HashSet::new();
+        StageReport {
+            stage: stage.name,
+            computed: pending.todo.len(),
+            reused: pending.frames.len() - pending.todo.len(),
+            seconds,
+            location: self.job.cache.stage_dir(stage.name),
+            warnings: std::iter::once(pending.damaged)
+                .chain(warnings)
+                .flatten()
+                .filter(|w| seen.insert(w.clone()))
+                .collect(),
+            outputs,
+        }
+    }
+
+    /// Runs consecutive per-frame stages frame by frame: a frame's stages in pipeline
+    /// order, frames in parallel. A frame's stages share its decoded images, which are
+    /// dropped when its last stage is done, so each frame is decoded once. A stage's
+    /// seconds are the group's wall time shared in proportion to its compute time.
+    fn per_frame(&self, group: &[(&'static StageDef, bool)]) -> Result<Vec<StageReport>> {
+        let start = Instant::now();
+        let pending: Vec<Pending> = group
+            .iter()
+            .map(|&(stage, forced)| self.pending(stage, forced))
+            .collect();
+        let mut frames: Vec<u32> = pending.iter().flat_map(|p| p.todo.clone()).collect();
+        frames.sort_unstable();
+        frames.dedup();
+        let bars = indicatif::MultiProgress::new();
+        let bars: Vec<ProgressBar> = group
+            .iter()
+            .zip(&pending)
+            .map(|(&(stage, _), p)| bars.add(bar(p.todo.len(), stage.name)))
+            .collect();
+        // Per frame, per stage: the warnings and the compute seconds (None: not computed).
+        let done: Vec<Vec<Option<Computed>>> = frames
+            .par_iter()
+            .map(|&f| {
+                let mut out = Vec::with_capacity(group.len());
+                for (k, &(stage, _)) in group.iter().enumerate() {
+                    if pending[k].todo.binary_search(&f).is_err() {
+                        out.push(None);
+                        continue;
+                    }
+                    let Compute::Frame(compute) = stage.compute else {
+                        unreachable!("a per-frame stage computes frames")
+                    };
+                    let t = Instant::now();
+                    let result = compute(self.ctx, f);
+                    let seconds = t.elapsed().as_secs_f64();
+                    let result = result.and_then(|o| {
+                        self.commit(stage, f, o.files, seconds)?;
+                        Ok(o.warnings)
+                    });
+                    if result.is_err() {
+                        self.ctx.forget_frame_images(f);
+                    }
+                    out.push(Some((result?, seconds)));
+                    bars[k].inc(1);
+                }
+                self.ctx.forget_frame_images(f);
+                Ok(out)
+            })
+            .collect::<Result<_>>()?;
+        bars.iter().for_each(ProgressBar::finish_and_clear);
+        let wall = start.elapsed().as_secs_f64();
+        let compute: Vec<f64> = (0..group.len())
+            .map(|k| {
+                let times = done.iter().filter_map(|d| d[k].as_ref()).map(|d| d.1);
+                times.fold(0.0, |a, b| a + b) // (an empty f64 sum is -0.0)
+            })
+            .collect();
+        let total: f64 = compute.iter().sum();
+        let mut done = done;
+        Ok(group
+            .iter()
+            .zip(pending)
+            .enumerate()
+            .map(|(k, (&(stage, _), p))| {
+                let warnings = done
+                    .iter_mut()
+                    .filter_map(|d| d[k].take())
+                    .map(|d| d.0)
+                    .collect();
+                let share = if total > 0.0 { compute[k] / total } else { 0.0 };
+                self.report(stage, p, wall * share, warnings, Vec::new())
+            })
+            .collect())
+    }
+
+    /// Runs one stage over its frames: sequence stages once, the reference stage on t0,
+    /// the tracked stage in order from t0.
+    fn stage(&self, stage: &'static StageDef, forced: bool) -> Result<StageReport> {
+        let start = Instant::now();
+        let ctx = self.ctx;
+        let frames = self.job.stage_frames(stage, self.reference);
+        if stage.scope == Scope::Sequence {
+            let finished = match stage.finish {
+                Some(finish) => finish(ctx, &frames)?,
+                None => Default::default(),
+            };
+            return Ok(StageReport {
+                stage: stage.name,
+                computed: finished.files,
+                reused: 0,
+                seconds: start.elapsed().as_secs_f64(),
+                location: self.job.config.output.clone(),
+                warnings: finished.warnings,
+                outputs: finished.outputs,
+            });
+        }
+        if stage.scope != Scope::PerFrame && frames.is_empty() {
+            return Ok(StageReport {
+                stage: stage.name,
+                computed: 0,
+                reused: 0,
+                seconds: 0.0,
+                location: self.job.cache.stage_dir(stage.name),
+                warnings: vec![format!(
+                    "{}: the sequence has no skeleton.yaml, so there is no body model or motion \
+                     (make one with `pipeline skeleton FILE`)",
+                    stage.name
+                )],
+                outputs: Vec::new(),
+            });
+        }
+        let pending = self.pending(stage, forced);
+        let progress = bar(pending.todo.len(), stage.name);
         let commit = |f: u32, files: Vec<String>, seconds: f64| -> Result<()> {
-            job.cache.commit(&Manifest {
-                stage: stage.name.to_string(),
-                frame: f,
-                key: keys[&(stage.name, f)].clone(),
-                format_version: stage.format_version,
-                files,
-                seconds,
-                digests: Vec::new(),
-            })?;
+            self.commit(stage, f, files, seconds)?;
             progress.inc(1);
             Ok(())
         };
         let mut warnings: Vec<Vec<String>> = match stage.compute {
-            Compute::Frame(compute) => todo
+            Compute::Frame(compute) => pending
+                .todo
                 .par_iter()
                 .map(|&f| {
                     let t = Instant::now();
-                    let out = compute(&ctx, f)?;
+                    let out = compute(ctx, f)?;
                     commit(f, out.files, t.elapsed().as_secs_f64())?;
                     Ok(out.warnings)
                 })
@@ -447,7 +619,7 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             // Tracked frames depend on each other: in order, one at a time.
             Compute::Tracked(compute) => {
                 let mut warnings = Vec::new();
-                compute(&ctx, &todo, &mut |f, out, seconds| {
+                compute(ctx, &pending.todo, &mut |f, out, seconds| {
                     commit(f, out.files, seconds)?;
                     warnings.push(out.warnings);
                     Ok(())
@@ -456,32 +628,20 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
             }
         };
         progress.finish_and_clear();
-        warnings.insert(0, damaged);
         let mut outputs = Vec::new();
         if let Some(finish) = stage.finish {
-            let finished = finish(&ctx, &frames)?;
+            let finished = finish(ctx, &frames)?;
             outputs = finished.outputs;
             warnings.push(finished.warnings);
         }
-        reports.push(StageReport {
-            stage: stage.name,
-            computed: todo.len(),
-            reused: frames.len() - todo.len(),
-            seconds: start.elapsed().as_secs_f64(),
-            location: job.cache.stage_dir(stage.name),
-            // A note every frame gives alike is said once.
-            warnings: {
-                let mut seen = std::collections::HashSet::new();
-                warnings
-                    .into_iter()
-                    .flatten()
-                    .filter(|w| seen.insert(w.clone()))
-                    .collect()
-            },
+        Ok(self.report(
+            stage,
+            pending,
+            start.elapsed().as_secs_f64(),
+            warnings,
             outputs,
-        });
+        ))
     }
-    Ok(reports)
 }
 
 /// How many selected frames of each stage are up to date, stale or missing.

@@ -13,6 +13,23 @@ pub struct TriMesh {
 }
 
 impl TriMesh {
+    /// The vertices that share an edge with each vertex, sorted.
+    pub fn vertex_neighbours(&self) -> Vec<Vec<u32>> {
+        let mut out: Vec<Vec<u32>> = vec![Vec::new(); self.vertices.len()];
+        for t in &self.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                out[a as usize].push(b);
+                out[b as usize].push(a);
+            }
+        }
+        for list in &mut out {
+            list.sort_unstable();
+            list.dedup();
+        }
+        out
+    }
+
     /// Area-weighted vertex normals (unit length; zero for isolated vertices).
     pub fn vertex_normals(&self) -> Vec<Vector3<f64>> {
         let mut normals = vec![Vector3::zeros(); self.vertices.len()];

@@ -12,18 +12,7 @@ pub fn taubin(mesh: &mut TriMesh, iterations: usize) {
         return;
     }
     let n = mesh.vertices.len();
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            neighbours[a as usize].push(b);
-            neighbours[b as usize].push(a);
-        }
-    }
-    for list in &mut neighbours {
-        list.sort_unstable();
-        list.dedup();
-    }
+    let neighbours = mesh.vertex_neighbours();
     let step = |factor: f64, v: &mut Vec<Vector3<f64>>| {
         let moved: Vec<Vector3<f64>> = (0..n)
             .into_par_iter()

@@ -43,39 +43,31 @@ impl GreyImage {
         let total: f32 = kernel.iter().sum();
         let kernel: Vec<f32> = kernel.iter().map(|k| k / total).collect();
         let (w, h) = (self.w, self.h);
-        // Horizontal pass, row by row, on a row padded by clamping. Outputs are written
-        // before they are read: accumulating into freshly zeroed memory would fault every
-        // page twice (the shared zero page, then a copy on write).
-        let mut tmp = Vec::with_capacity(w * h);
-        tmp.par_extend((0..h).into_par_iter().flat_map_iter(|y| {
-            let row = &self.px[y * w..(y + 1) * w];
-            let padded: Vec<f32> = (0..w + 2 * r)
-                .map(|i| row[(i as i64 - r as i64).clamp(0, w as i64 - 1) as usize])
-                .collect();
-            let mut out: Vec<f32> = padded[..w].iter().map(|v| kernel[0] * v).collect();
-            for (k, kv) in kernel.iter().enumerate().skip(1) {
-                out.iter_mut()
-                    .zip(&padded[k..k + w])
-                    .for_each(|(o, v)| *o += kv * v);
-            }
-            out
-        }));
+        // Horizontal pass, row by row, on a row padded by clamping. Each output row is
+        // written (not accumulated) first: accumulating into freshly zeroed memory would
+        // fault every page twice (the shared zero page, then a copy on write).
+        let mut tmp = vec![0.0f32; w * h];
+        tmp.par_chunks_mut(w)
+            .zip(self.px.par_chunks(w))
+            .for_each_init(
+                || vec![0.0f32; w + 2 * r],
+                |padded, (out, row)| {
+                    padded[..r].fill(row[0]);
+                    padded[r..r + w].copy_from_slice(row);
+                    padded[r + w..].fill(row[w - 1]);
+                    weighted_rows(&kernel, |k| &padded[k..k + w], out);
+                },
+            );
         // Vertical pass: each output row is a weighted sum of whole rows.
         let tmp_row = |y: i64| {
             let sy = y.clamp(0, h as i64 - 1) as usize;
             &tmp[sy * w..(sy + 1) * w]
         };
-        let mut px = Vec::with_capacity(w * h);
-        px.par_extend((0..h).into_par_iter().flat_map_iter(|y| {
+        let mut px = vec![0.0f32; w * h];
+        px.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
             let top = y as i64 - r as i64;
-            let mut out: Vec<f32> = tmp_row(top).iter().map(|v| kernel[0] * v).collect();
-            for (k, kv) in kernel.iter().enumerate().skip(1) {
-                out.iter_mut()
-                    .zip(tmp_row(top + k as i64))
-                    .for_each(|(o, v)| *o += kv * v);
-            }
-            out
-        }));
+            weighted_rows(&kernel, |k| tmp_row(top + k as i64), out);
+        });
         GreyImage {
             w: self.w,
             h: self.h,
@@ -97,6 +89,9 @@ impl GreyImage {
         // The grid is affine: inside the image iff its four corners are. A small margin
         // below the last row and column keeps every sample's right and lower neighbours in
         // the image despite f32 rounding.
+        if self.w.max(self.h) > i32::MAX as usize {
+            return false; // beyond the 32-bit pixel indices below (no real image is)
+        }
         let (wm, hm) = ((self.w - 1) as f64 - 1e-3, (self.h - 1) as f64 - 1e-3);
         for (si, sj) in [(-half, -half), (half, -half), (-half, half), (half, half)] {
             let q = origin + du * si + dv * sj;
@@ -117,10 +112,10 @@ impl GreyImage {
                 // [0, w - 1 - 1e-3] x [0, h - 1 - 1e-3] (checked above), so every sample
                 // does: x and y are finite, non-negative and below w - 1 and h - 1, and
                 // k + w + 1 < w h.
-                let (xi, yi): (usize, usize) =
-                    unsafe { (x.to_int_unchecked(), y.to_int_unchecked()) };
+                // (32-bit conversions: the images are far smaller than 2^31 pixels.)
+                let (xi, yi): (i32, i32) = unsafe { (x.to_int_unchecked(), y.to_int_unchecked()) };
                 let (fx, fy) = (x - xi as f32, y - yi as f32);
-                let k = yi * w + xi;
+                let k = yi as usize * w + xi as usize;
                 let (a, b, c, d) = unsafe {
                     (
                         *p.get_unchecked(k),
@@ -135,6 +130,16 @@ impl GreyImage {
             }
         }
         true
+    }
+}
+
+/// `out` = sum over k of `kernel[k] * row(k)`, written before it is accumulated.
+fn weighted_rows<'a>(kernel: &[f32], row: impl Fn(usize) -> &'a [f32], out: &mut [f32]) {
+    out.iter_mut()
+        .zip(row(0))
+        .for_each(|(o, v)| *o = kernel[0] * v);
+    for (k, kv) in kernel.iter().enumerate().skip(1) {
+        out.iter_mut().zip(row(k)).for_each(|(o, v)| *o += kv * v);
     }
 }
 

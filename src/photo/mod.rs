@@ -5,9 +5,10 @@
 pub mod depth;
 pub mod grey;
 pub mod patch;
+pub mod refine;
 pub mod zncc;
 
-pub use depth::{depth_maps, farthest_around, splatted_depth_maps};
+pub use depth::{depth_maps, farthest_around, splatted_depth_maps, Visibility};
 pub use grey::{grey, GreyImage};
-pub use patch::{patch_grid, sample_patch};
+pub use patch::{mean_pair_zncc, patch_grid, sample_patch};
 pub use zncc::{dot, normalize, zncc, zncc_of_pairs};

@@ -45,3 +45,39 @@ pub fn sample_patch(
         .sample_grid(origin, du, dv, window, &mut patch)
         .then_some(patch)
 }
+
+/// The mean ZNCC over all pairs of the cameras `seen` of patches of `window` x `window`
+/// points spaced `step` metres on the plane through `x` with normal `n` (a patch leaving an
+/// image correlates 0). `patches` is scratch space. At least two cameras are expected.
+#[allow(clippy::too_many_arguments)]
+pub fn mean_pair_zncc(
+    cams: &[Camera],
+    images: &[GreyImage],
+    seen: &[usize],
+    x: &Vector3<f64>,
+    n: &Vector3<f64>,
+    window: usize,
+    step: f64,
+    patches: &mut Vec<f32>,
+) -> f32 {
+    let (k, len) = (seen.len(), window * window);
+    patches.resize(k * len, 0.0);
+    for (slot, &c) in seen.iter().enumerate() {
+        let out = &mut patches[slot * len..(slot + 1) * len];
+        let ok = patch_grid(&cams[c], x, n, step)
+            .is_some_and(|(o, du, dv)| images[c].sample_grid(o, du, dv, window, out));
+        if ok {
+            super::normalize(out);
+        } else {
+            out.fill(0.0);
+        }
+    }
+    let mut sum = 0.0f32;
+    for a in 0..k {
+        let pa = &patches[a * len..(a + 1) * len];
+        for b in a + 1..k {
+            sum += super::dot(pa, &patches[b * len..(b + 1) * len]);
+        }
+    }
+    sum / (k * (k - 1) / 2).max(1) as f32
+}

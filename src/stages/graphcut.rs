@@ -43,7 +43,6 @@
 //!   phantom volume stays, for stage 4 to flag).
 
 use crate::camera::Camera;
-use crate::geometry::cone_distance::ConeDistance;
 use crate::geometry::grid::{GridSpec, FACE_OFFSETS};
 use crate::geometry::TriMesh;
 use crate::maxflow::GridGraph;
@@ -87,6 +86,10 @@ pub struct GraphcutParams {
     /// the rims cover much of the surface and little is refined (tripod t0: accuracy 1.63 cm
     /// with, 1.31 cm without); on real captures it keeps the silhouettes explained.
     pub pin_rims: bool,
+    /// Optional last step: each mesh vertex seen by two or more cameras moves along its
+    /// normal to the shift of best multi-view ZNCC, searched up to this many voxels either
+    /// way, regularised over its neighbours ([`crate::photo::refine`]). Default 0: off.
+    pub photo_refine: f64,
 }
 
 impl Default for GraphcutParams {
@@ -102,6 +105,7 @@ impl Default for GraphcutParams {
             ballooning_evidence: None,
             smoothing_iterations: 10,
             pin_rims: false,
+            photo_refine: 0.0,
         }
     }
 }
@@ -118,6 +122,12 @@ pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
         return Err(format!(
             "graphcut.window must be an odd number of pixels from 3 to 31, got {}",
             p.window
+        ));
+    }
+    if !(0.0..=3.0).contains(&p.photo_refine) {
+        return Err(format!(
+            "graphcut.photo_refine must lie in [0, 3] voxels (0: off), got {}",
+            p.photo_refine
         ));
     }
     if p.sigma.is_nan()
@@ -552,27 +562,25 @@ pub fn patch_consistency(
 }
 
 /// Meshes a refined occupancy as the hull stage does, intersected with the hull's solid on
-/// the silhouette cones (`hull_sdf` moved onto `cones` as the hull's mesh is,
+/// the silhouette cones (`hull_on_cones`, the field the hull stage meshed,
 /// [`crate::stages::visual_hull::on_the_cones`]): where the cut kept the hull, its surface
 /// is the hull's, below the voxel size; where it carved, it lies between the kept and
 /// carved voxels; it never lies outside the hull.
 pub fn mesh(
     grid: &GridSpec,
     occupied: &[bool],
-    hull_sdf: &[f32],
-    cones: &ConeDistance,
+    hull_on_cones: &[f32],
     smoothing: usize,
 ) -> (Vec<f32>, TriMesh) {
-    use crate::stages::visual_hull::{box_blur_3d, on_the_cones};
+    use crate::stages::visual_hull::box_blur_3d;
     let mut sdf = box_blur_3d(
         grid,
         &crate::geometry::distance::signed_distance(grid, occupied),
     );
-    let hull = on_the_cones(grid, hull_sdf, cones);
     let field: Vec<f32> = sdf
         .iter()
-        .zip(hull)
-        .map(|(&cut, hull)| cut.max(hull))
+        .zip(hull_on_cones)
+        .map(|(&cut, &hull)| cut.max(hull))
         .collect();
     let mut m = crate::stages::visual_hull::mesh_sdf(grid, &field);
     crate::geometry::smooth::taubin(&mut m, smoothing);

@@ -17,14 +17,21 @@ use crate::dataset::{frame_stem, Sequence};
 use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
+use crate::photo::GreyImage;
 use rayon::prelude::*;
 use silhouette::SilhouetteMethod;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 /// Everything a stage may read for one run.
 pub struct Context<'a> {
     pub config: &'a Config,
     pub sequence: &'a Sequence,
     pub cache: &'a Cache,
+    /// Grey images of the frames being computed, decoded once and shared by a frame's
+    /// stages (the graph cut and the reliability stage), when the runner asks for it; it
+    /// drops a frame's images when the frame's last stage is done.
+    frame_images: Option<Mutex<HashMap<u32, Arc<Vec<GreyImage>>>>>,
 }
 
 impl<'a> Context<'a> {
@@ -33,6 +40,24 @@ impl<'a> Context<'a> {
             config,
             sequence,
             cache,
+            frame_images: None,
+        }
+    }
+
+    /// This context, keeping each frame's grey images until [`Context::forget_frame_images`].
+    pub fn sharing_frame_images(self) -> Context<'a> {
+        Context {
+            frame_images: Some(Mutex::default()),
+            ..self
+        }
+    }
+
+    /// Drops the grey images kept for `frame`.
+    pub fn forget_frame_images(&self, frame: u32) {
+        if let Some(kept) = &self.frame_images {
+            kept.lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .remove(&frame);
         }
     }
 }
@@ -131,7 +156,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
-        format_version: 4,
+        format_version: 5,
         params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
         sources: visual_hull_sources,
         compute: Compute::Frame(visual_hull_compute),
@@ -142,7 +167,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["visual_hull"],
-        format_version: 14,
+        format_version: 15,
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: Compute::Frame(graphcut_compute),
@@ -311,6 +336,23 @@ pub fn hull_files(frame: u32) -> (String, String) {
     (format!("{stem}.ply"), format!("{stem}.grid"))
 }
 
+/// Path of the hull stage's band file of a frame ([`visual_hull::ConeBand`]), relative to
+/// its stage folder.
+pub fn hull_band_file(frame: u32) -> String {
+    format!("{}.band", frame_stem(frame))
+}
+
+/// Reads the hull's solid on the cones of a frame: its stored signed distance `sdf` with
+/// the band file's values.
+pub fn load_hull_on_cones(ctx: &Context, frame: u32, sdf: &[f32]) -> Result<Vec<f32>> {
+    let path = ctx
+        .cache
+        .stage_dir("visual_hull")
+        .join(hull_band_file(frame));
+    let data = crate::limits::read_cache_file(&path)?;
+    Ok(visual_hull::ConeBand::parse(&path, &data, sdf.len())?.applied_to(sdf))
+}
+
 fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let masks = load_silhouettes(ctx, frame)?;
     let p = &ctx.config.visual_hull;
@@ -319,8 +361,12 @@ fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
     })?;
     let dir = ctx.cache.stage_dir("visual_hull");
     let mut warnings = Vec::new();
-    let (mesh, grid_data) = match &hull {
-        Some(h) => (h.mesh.clone(), visual_hull::grid_bytes(&h.grid, &h.sdf)),
+    let (mesh, grid_data, band) = match &hull {
+        Some(h) => (
+            h.mesh.clone(),
+            visual_hull::grid_bytes(&h.grid, &h.sdf),
+            h.on_cones.clone(),
+        ),
         None => {
             warnings.push(format!(
                 "frame {frame}: the silhouettes leave no volume (subject out of view?); the hull is empty"
@@ -335,10 +381,15 @@ fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
                     },
                     &[],
                 ),
+                Default::default(),
             )
         }
     };
-    write_reconstruction(&dir, frame, &mesh, &grid_data, warnings)
+    let mut out = write_reconstruction(&dir, frame, &mesh, &grid_data, warnings)?;
+    let band_file = hull_band_file(frame);
+    crate::fsutil::write_atomic(&dir.join(&band_file), &band.to_bytes())?;
+    out.files.push(band_file);
+    Ok(out)
 }
 
 /// Writes a reconstruction stage's artifacts of a frame: the mesh (binary PLY with normals)
@@ -375,7 +426,7 @@ pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImag
             let path = dir
                 .join(frame_stem(frame))
                 .join(format!("{}.png", cam.name));
-            Ok(crate::dataset::decode(&path, None)?.to_luma8())
+            Ok(crate::dataset::decode(&path, None)?.into_luma8())
         })
         .collect()
 }
@@ -478,13 +529,28 @@ pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Ve
     visual_hull::parse_grid(&path, &data)
 }
 
-/// Loads the frame's images as grey.
-fn grey_frames(ctx: &Context, frame: u32) -> Result<Vec<crate::photo::GreyImage>> {
+/// The frame's images as grey: decoded, or kept from an earlier stage of the frame
+/// ([`Context::sharing_frame_images`]).
+fn grey_frames(ctx: &Context, frame: u32) -> Result<Arc<Vec<GreyImage>>> {
+    let lock = |m: &'_ Mutex<HashMap<u32, Arc<Vec<GreyImage>>>>| {
+        m.lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&frame)
+            .cloned()
+    };
+    if let Some(kept) = ctx.frame_images.as_ref().and_then(lock) {
+        return Ok(kept);
+    }
     let frames: Vec<image::RgbImage> = (0..ctx.sequence.cameras.len())
         .into_par_iter()
         .map(|c| ctx.sequence.load_frame(c, frame))
         .collect::<Result<_>>()?;
-    Ok(crate::photo::grey(&frames))
+    let grey = Arc::new(crate::photo::grey(&frames));
+    if let Some(kept) = &ctx.frame_images {
+        let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+        kept.insert(frame, grey.clone());
+    }
+    Ok(grey)
 }
 
 /// Paths of the reliability stage's artifacts of a frame (coloured PLY, compact
@@ -581,7 +647,12 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         ));
         spinner.tick();
     };
-    let masks = load_silhouettes(ctx, frame)?;
+    // The silhouettes pin the rims; nothing else in the cut reads them.
+    let masks = if p.pin_rims {
+        load_silhouettes(ctx, frame)?
+    } else {
+        Vec::new()
+    };
     let refined = graphcut::refine(
         &grid,
         &occupied,
@@ -594,8 +665,18 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         &mut report,
     );
     spinner.finish_and_clear();
-    let cones = visual_hull::cones(cams, &masks, &ctx.config.visual_hull, &grid);
-    let (refined_sdf, mesh) = graphcut::mesh(&grid, &refined, &sdf, &cones, p.smoothing_iterations);
+    let hull_on_cones = load_hull_on_cones(ctx, frame, &sdf)?;
+    let (refined_sdf, mut mesh) =
+        graphcut::mesh(&grid, &refined, &hull_on_cones, p.smoothing_iterations);
+    if p.photo_refine > 0.0 {
+        use crate::photo::refine::{refine_along_normals, RefineSettings};
+        let settings = RefineSettings::with_search(p.photo_refine);
+        let smoothed: Vec<GreyImage> = images
+            .par_iter()
+            .map(|g| g.blurred(reliability::ReliabilityParams::default().image_sigma))
+            .collect();
+        refine_along_normals(cams, &smoothed, &mut mesh, grid.voxel, &settings);
+    }
     write_reconstruction(
         &dir,
         frame,

@@ -14,8 +14,9 @@
 //! to within a voxel; near it, the distance to the silhouette cones
 //! ([`crate::geometry::cone_distance`]) moves it onto the cones themselves, below the voxel
 //! size ([`on_the_cones`]). That field is meshed with marching tetrahedra
-//! ([`crate::geometry::isosurface`]) and optionally Taubin-smoothed. The grid and the
-//! occupancy's signed distance are kept for the graph-cut stage.
+//! ([`crate::geometry::isosurface`]) and optionally Taubin-smoothed. The grid, the
+//! occupancy's signed distance and the shell where the meshed field differs from it
+//! ([`ConeBand`]) are kept for the graph-cut stage.
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -81,6 +82,9 @@ pub struct Hull {
     pub grid: GridSpec,
     pub occupied: Vec<bool>,
     pub sdf: Vec<f32>,
+    /// The field the mesh was extracted from (the solid on the cones) where it differs from
+    /// `sdf`: a thin shell around the surface, kept for the graph cut's mesh.
+    pub on_cones: ConeBand,
     pub mesh: TriMesh,
 }
 
@@ -556,13 +560,16 @@ pub fn reconstruct(
     fill_cavities(&grid, &mut occupied);
     let mut sdf = box_blur_3d(&grid, &signed_distance(&grid, &occupied));
     let cones = cones(cams, masks, p, &grid);
-    let mut mesh = mesh_sdf(&grid, &on_the_cones(&grid, &sdf, &cones));
+    let field = on_the_cones(&grid, &sdf, &cones);
+    let mut mesh = mesh_sdf(&grid, &field);
     taubin(&mut mesh, p.smoothing_iterations);
     with_occupancy_sign(&mut sdf, &occupied);
+    let on_cones = ConeBand::between(&sdf, &field);
     Ok(Some(Hull {
         grid,
         occupied,
         sdf,
+        on_cones,
         mesh,
     }))
 }
@@ -638,6 +645,74 @@ pub fn mesh_sdf(grid: &GridSpec, sdf: &[f32]) -> TriMesh {
         values,
     };
     isosurface::extract(&field)
+}
+
+/// A field given as a base field (the stored signed distance) with some voxels changed:
+/// the hull's solid on the cones, which differs from the occupancy's distance only within
+/// [`CONE_REACH`] voxels of the surface.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ConeBand {
+    /// (voxel index, value in metres), by increasing index.
+    pub changed: Vec<(u32, f32)>,
+}
+
+/// Magic bytes of the band file: then the entry count (u64) and per entry the voxel index
+/// (u32) and the value (f32), little-endian.
+const BAND_MAGIC: &[u8; 8] = b"HPBAND01";
+
+impl ConeBand {
+    /// The voxels where `field` differs from `base`.
+    pub fn between(base: &[f32], field: &[f32]) -> ConeBand {
+        ConeBand {
+            changed: (0..base.len())
+                .filter(|&i| base[i].to_bits() != field[i].to_bits())
+                .map(|i| (i as u32, field[i]))
+                .collect(),
+        }
+    }
+
+    /// `base` with the band's values.
+    pub fn applied_to(&self, base: &[f32]) -> Vec<f32> {
+        let mut out = base.to_vec();
+        for &(i, v) in &self.changed {
+            out[i as usize] = v;
+        }
+        out
+    }
+
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(16 + 8 * self.changed.len());
+        out.extend_from_slice(BAND_MAGIC);
+        out.extend_from_slice(&(self.changed.len() as u64).to_le_bytes());
+        for &(i, v) in &self.changed {
+            out.extend_from_slice(&i.to_le_bytes());
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out
+    }
+
+    /// Reads what [`ConeBand::to_bytes`] wrote, for a grid of `voxels` voxels; `path` names
+    /// the file in errors.
+    pub fn parse(path: &std::path::Path, data: &[u8], voxels: usize) -> Result<ConeBand> {
+        let bad = |what: &str| Error::invalid(path, format!("not a hullpose band file: {what}"));
+        if data.len() < 16 || &data[..8] != BAND_MAGIC {
+            return Err(bad("no header (or truncated)"));
+        }
+        let n = u64::from_le_bytes(data[8..16].try_into().unwrap());
+        if n.checked_mul(8).and_then(|b| b.checked_add(16)) != Some(data.len() as u64) {
+            return Err(bad("its length does not match its entry count"));
+        }
+        let mut changed = Vec::with_capacity(n as usize);
+        for rec in data[16..].chunks_exact(8) {
+            let i = u32::from_le_bytes(rec[..4].try_into().unwrap());
+            let v = f32::from_le_bytes(rec[4..].try_into().unwrap());
+            if i as usize >= voxels || !v.is_finite() {
+                return Err(bad("an entry outside the grid or not finite"));
+            }
+            changed.push((i, v));
+        }
+        Ok(ConeBand { changed })
+    }
 }
 
 /// Binary grid file: magic, dims, origin, voxel size, then the signed distance per voxel.
