@@ -48,6 +48,16 @@ fn zncc_separates_true_from_false_surface() {
         .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
         .collect();
     assert_eq!(rows.len(), 19);
+    // On every frame, where ZNCC is defined (two or more cameras see the vertex), the issue's
+    // bound is 0.9.
+    for r in &rows {
+        assert!(
+            r[6] >= 0.95,
+            "t{}: ROC AUC over seen vertices {}",
+            r[0],
+            r[6]
+        );
+    }
     for r in rows
         .iter()
         .filter(|r| [6.0, 7.0, 8.0, 11.0, 12.0, 13.0].contains(&r[0]))
@@ -55,12 +65,6 @@ fn zncc_separates_true_from_false_surface() {
         let (frame, false_vertices, auc, rho_false, rho_true) = (r[0], r[2], r[3], r[4], r[5]);
         assert!(false_vertices > 1000.0, "t{frame}: phantom volume present");
         assert!(auc >= 0.85, "t{frame}: ROC AUC {auc}");
-        // Where ZNCC is defined (two or more cameras see the vertex).
-        assert!(
-            r[6] >= 0.95,
-            "t{frame}: ROC AUC over seen vertices {}",
-            r[6]
-        );
         assert!(
             rho_false < 0.2,
             "t{frame}: mean rho_p of false vertices {rho_false}"
