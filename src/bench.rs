@@ -150,9 +150,7 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         .map(|c| job.sequence.load_frame(c, frame))
         .collect::<Result<_>>()?;
     let t_load = t.elapsed().as_secs_f64();
-    let (t_depth, depth) = best_of(1, || {
-        crate::photo::splatted_depth_maps(cams, &hull, grid.voxel)
-    });
+    let (t_depth, depth) = best_of(1, || crate::photo::depth_maps(cams, &hull));
     let (t_grey, images) = best_of(1, || crate::photo::grey(&frames));
     let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;

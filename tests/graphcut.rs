@@ -49,25 +49,33 @@ fn concavity_errors(made: &Made, seq: &str, dir: &Path, frame: u32) -> (f64, f64
     let truth = sequence.ground_truth_mesh(frame).unwrap().unwrap();
     let normals = truth.vertex_normals();
     let truth_index = PointIndex::new(truth.vertices.clone(), 0.02);
-    let depth = hullpose::photo::splatted_depth_maps(&sequence.cameras, &truth, 0.01);
+    let depth = hullpose::photo::depth_maps(&sequence.cameras, &truth);
     let samples = hullpose::eval::sample_surface(&truth, 0.005);
     let hull = PointIndex::new(mesh(dir, "visual_hull", frame).vertices, 0.02);
     let refined = PointIndex::new(mesh(dir, "graphcut", frame).vertices, 0.02);
     let (mut dh, mut dr, mut n) = (0.0, 0.0, 0usize);
     for s in &samples {
         let normal = normals[truth_index.nearest(s).unwrap().0];
+        // Seen clearly: facing the camera, and no true surface more than 1 cm in front of it
+        // at its projection's pixel or the 8 around it (not on an occluding contour, where
+        // a view grazes the surface).
         let seen = sequence
             .cameras
             .iter()
             .zip(&depth)
             .filter(|(cam, d)| {
                 let (px, z) = cam.project_with_depth(s);
-                z > 0.0
-                    && cam.in_image(&px)
-                    && normal.dot(&(cam.centre() - s)) > 0.0
-                    && (z as f32)
-                        <= d[px.y.round() as usize * cam.width as usize + px.x.round() as usize]
-                            + 0.01
+                if z <= 0.0 || !cam.in_image(&px) || normal.dot(&(cam.centre() - s)) <= 0.0 {
+                    return false;
+                }
+                let (w, h) = (cam.width as i64, cam.height as i64);
+                let (u, v) = (px.x.round() as i64, px.y.round() as i64);
+                (-1..=1).all(|dy| {
+                    (-1..=1).all(|dx| {
+                        let (x, y) = ((u + dx).clamp(0, w - 1), (v + dy).clamp(0, h - 1));
+                        (z as f32) <= d[(y * w + x) as usize] + 0.01
+                    })
+                })
             })
             .count();
         let h = hull.nearest(s).unwrap().1;
@@ -122,8 +130,8 @@ fn check_scene(
         let (hull, refined, n) = concavity_errors(made, seq, dir.path(), f);
         eprintln!("{seq} t{f}: {n} seen samples > 2 voxels from the hull: hull {:.2} cm, refined {:.2} cm", hull * 100.0, refined * 100.0);
         assert!(n > 50, "{seq} t{f}: such regions exist");
-        // The refinement at least halves the hull's error there (measured: tripod -54% at
-        // 512x384, humanoid -54% at 384x288, where a pixel is about a voxel).
+        // The refinement at least halves the hull's error there (measured: tripod -81% at
+        // 512x384, humanoid -58% at 384x288, where a pixel is about a voxel).
         assert!(
             refined <= max_ratio * hull,
             "{seq} t{f}: refined {refined:.4} vs hull {hull:.4}"

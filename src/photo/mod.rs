@@ -8,7 +8,7 @@ pub mod patch;
 pub mod refine;
 pub mod zncc;
 
-pub use depth::{depth_maps, farthest_around, splatted_depth_maps, Visibility};
+pub use depth::{depth_maps, farthest_around, Visibility};
 pub use grey::{grey, GreyImage};
 pub use patch::{mean_pair_zncc, patch_grid, sample_patch};
 pub use zncc::{dot, normalize, zncc, zncc_of_pairs};

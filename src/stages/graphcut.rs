@@ -7,8 +7,8 @@
 //!   voxel keeps its hull label.
 //! - **Visibility** of a band voxel x: the cameras that see the nearest hull surface point
 //!   p = x - sdf(x) * n (n the unit gradient of the signed distance): p faces the camera
-//!   (n . (c - p) > 0) and the camera's depth map of the hull mesh (splatted vertices) is not
-//!   closer than p by more than 1.5 voxels.
+//!   (n . (c - p) > 0) and the camera's depth map of the hull mesh (z-buffer, the farthest of
+//!   the 2 x 2 pixels around p's projection) is not closer than p by more than 1.5 voxels.
 //! - **Photo-consistency** C(x) in [-1, 1]: zero-mean normalized cross-correlation of
 //!   patches of `window` x `window` points spaced `patch_spacing` voxels on the plane through x
 //!   parallel to the hull's tangent plane, projected into each visible camera (affinely, from
@@ -46,7 +46,7 @@ use crate::camera::Camera;
 use crate::geometry::grid::{GridSpec, FACE_OFFSETS};
 use crate::geometry::TriMesh;
 use crate::maxflow::GridGraph;
-use crate::photo::{dot, normalize, patch_grid, splatted_depth_maps, GreyImage};
+use crate::photo::{depth_maps, dot, normalize, patch_grid, GreyImage, Visibility};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -220,11 +220,20 @@ pub fn refine_timed(
         node_of[i] = k as u32;
     }
     // Photo-consistency and hull normal (none where the distance field is flat) per band voxel.
+    let visibility = hull_visibility(cams, depth, h);
     let photo: Vec<(f64, Option<Vector3<f64>>)> = band
         .par_iter()
         .map(|&i| {
             let [x, y, z] = grid.coords(i);
-            photo_consistency(grid, sdf, cams, images, depth, p, &grid.centre(x, y, z))
+            photo_consistency(
+                grid,
+                sdf,
+                cams,
+                images,
+                &visibility,
+                p,
+                &grid.centre(x, y, z),
+            )
         })
         .collect();
     let rho: Vec<f64> = photo
@@ -477,7 +486,7 @@ fn photo_consistency(
     sdf: &[f32],
     cams: &[Camera],
     images: &[GreyImage],
-    depth: &[Vec<f32>],
+    visibility: &Visibility,
     p: &GraphcutParams,
     x: &Vector3<f64>,
 ) -> (f64, Option<Vector3<f64>>) {
@@ -495,18 +504,18 @@ fn photo_consistency(
     let n = grad.normalize();
     let surface = x - d(Vector3::zeros()) * n;
     (
-        patch_consistency(cams, images, depth, p, h, x, &n, &surface),
+        patch_consistency(cams, images, visibility, p, h, x, &n, &surface),
         Some(n),
     )
 }
 
-/// C at point `x` with patch normal `n`, seen by the cameras that see `surface` (facing and
-/// not hidden according to `depth`, within 1.5 `h`); -1 without a usable camera pair.
+/// C at point `x` with patch normal `n`, seen by the cameras that see `surface`
+/// ([`hull_visibility`]); -1 without a usable camera pair.
 #[allow(clippy::too_many_arguments)]
 pub fn patch_consistency(
     cams: &[Camera],
     images: &[GreyImage],
-    depth: &[Vec<f32>],
+    visibility: &Visibility,
     p: &GraphcutParams,
     h: f64,
     x: &Vector3<f64>,
@@ -517,19 +526,11 @@ pub fn patch_consistency(
     let len = p.window * p.window;
     let mut dirs: Vec<Vector3<f64>> = Vec::with_capacity(cams.len());
     let mut patches: Vec<f32> = Vec::with_capacity(cams.len() * len);
-    for (c, cam) in cams.iter().enumerate() {
+    let mut seen = Vec::with_capacity(cams.len());
+    visibility.seeing(surface, n, &mut seen);
+    for &c in &seen {
+        let cam = &cams[c];
         let centre = cam.centre();
-        if n.dot(&(centre - surface)) <= 0.0 {
-            continue;
-        }
-        let (sp, z) = cam.project_with_depth(surface);
-        if z <= 0.0 || !cam.in_image(&sp) {
-            continue;
-        }
-        let (u, v) = (sp.x.round() as usize, sp.y.round() as usize);
-        if (z as f32) > depth[c][v * cam.width as usize + u] + 1.5 * h as f32 {
-            continue; // the hull hides the point from this camera
-        }
         let step = p.patch_spacing * h;
         let start = patches.len();
         patches.resize(start + len, 0.0);
@@ -588,6 +589,12 @@ pub fn mesh(
     (sdf, m)
 }
 
+/// Which cameras see a point of a surface whose depth maps are `depth` (voxel size `h`):
+/// the point faces the camera and no surface lies more than 1.5 voxels in front of it.
+pub fn hull_visibility<'a>(cams: &'a [Camera], depth: &'a [Vec<f32>], h: f64) -> Visibility<'a> {
+    Visibility::new(cams, depth, 90.0, 1.5 * h)
+}
+
 /// Mean photo-consistency C over a mesh's vertices seen by a usable camera pair (patches on
 /// the vertex's tangent plane, spaced as the stage's, `h` the voxel size), and how many
 /// vertices that is. Visibility from the mesh's own depth maps.
@@ -598,13 +605,14 @@ pub fn mean_vertex_consistency(
     p: &GraphcutParams,
     h: f64,
 ) -> (f64, usize) {
-    let depth = splatted_depth_maps(cams, mesh, h);
+    let depth = depth_maps(cams, mesh);
+    let visibility = hull_visibility(cams, &depth, h);
     let normals = mesh.vertex_normals();
     let scores: Vec<f64> = mesh
         .vertices
         .par_iter()
         .zip(normals.par_iter())
-        .map(|(v, n)| patch_consistency(cams, images, &depth, p, h, v, n, v))
+        .map(|(v, n)| patch_consistency(cams, images, &visibility, p, h, v, n, v))
         .filter(|&c| c > -1.0)
         .collect();
     (

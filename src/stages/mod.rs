@@ -637,7 +637,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
     }
     let hull = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
     let cams = &ctx.sequence.cameras;
-    let depth = crate::photo::splatted_depth_maps(cams, &hull, grid.voxel);
+    let depth = crate::photo::depth_maps(cams, &hull);
     let images = grey_frames(ctx, frame)?;
     // Long cuts report their progress (drawn only when stderr is a terminal).
     let spinner = indicatif::ProgressBar::new_spinner();
