@@ -167,7 +167,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["visual_hull"],
-        format_version: 15,
+        format_version: 16,
         params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
         sources: graphcut_sources,
         compute: Compute::Frame(graphcut_compute),
