@@ -64,6 +64,9 @@ pub struct Fitter<'a> {
     pub photo_consistent: bool,
     /// The parts as capsules, for the interpenetration check ([`interpenetration`]).
     pub capsules: interpenetration::Capsules,
+    /// The motion prior's weight per model vertex ([`params::motion_prior_weight`]; it
+    /// needs the frame rate). 0: none.
+    pub motion_prior: f64,
 }
 
 impl<'a> Fitter<'a> {
@@ -89,6 +92,7 @@ impl<'a> Fitter<'a> {
             sample_normals,
             contact,
             max_joint_step: None,
+            motion_prior: 0.0,
             photo_consistent: true,
             capsules,
         }

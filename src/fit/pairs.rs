@@ -42,6 +42,8 @@ pub(super) struct Prepared {
     pub kept: std::sync::Mutex<(MovingQueries, MovingPoints)>,
     /// Observed vertices before thinning (for the diagnostics).
     pub observed: usize,
+    /// Where the motion prior pulls each thinned model vertex, and its weight.
+    pub prior: Option<(Vec<Vector3<f64>>, f64)>,
 }
 
 /// The frame's observation as the rounds use it: finite vertices only, thinned to
@@ -86,6 +88,7 @@ pub(super) fn prepare(obs: &Observation, p: &FitParams, model_vertices: usize) -
         obs,
         tree,
         kept: Default::default(),
+        prior: None,
     })
 }
 

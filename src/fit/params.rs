@@ -94,6 +94,27 @@ pub struct FitParams {
     pub restart: RestartParams,
     /// When a fitted frame counts as implausible ([`crate::fit::health`]).
     pub health: HealthParams,
+    /// The motion prior's acceleration, m/s^2: how fast a body part's velocity typically
+    /// changes. In `proposed`'s energy (the baselines have none), every model vertex is pulled towards where the previous two frames' motion
+    /// continued at constant velocity puts it, with weight (2 mm f^2 / a)^2 (f the frame
+    /// rate, `export.frame_rate`; a pair's weight is rho_c rho_p, at most 1): a Gaussian
+    /// prior whose spread a / f^2 is the distance such an acceleration moves a part off
+    /// the prediction in one frame, against surfaces known to about 2 mm. Smaller values
+    /// trust the prediction more; 0: no prior. Default 18 (a weight of 0.005 at 25 fps,
+    /// 0.00005 at 8 fps, where the prediction is ten times less sure).
+    pub motion_prior_acceleration: f64,
+}
+
+/// How well the surfaces place a point, metres: the motion prior's scale
+/// ([`FitParams::motion_prior_acceleration`]).
+const PRIOR_NOISE: f64 = 0.002;
+
+/// The motion prior's weight per model vertex at `frame_rate` frames per second (0: none).
+pub fn motion_prior_weight(acceleration: f64, frame_rate: f64) -> f64 {
+    if acceleration <= 0.0 || frame_rate <= 0.0 {
+        return 0.0;
+    }
+    (PRIOR_NOISE * frame_rate * frame_rate / acceleration).powi(2)
 }
 
 /// When a frame's rounds stop (pipeline.yaml key `fit.stop`).
@@ -207,6 +228,7 @@ impl Default for FitParams {
             min_observed_share: 0.05,
             restart: RestartParams::default(),
             health: HealthParams::default(),
+            motion_prior_acceleration: 18.0,
         }
     }
 }
@@ -265,6 +287,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         }
     }
     let h = &p.health;
+    if !(p.motion_prior_acceleration >= 0.0 && p.motion_prior_acceleration.is_finite()) {
+        return Err(format!(
+            "fit.motion_prior_acceleration must be a number of m/s^2, 0 or more (0: no motion prior), got {}",
+            p.motion_prior_acceleration
+        ));
+    }
     if !(positive(h.max_joint_speed) && h.iou_drop > 0.0 && h.iou_drop <= 1.0) {
         return Err(format!(
             "fit.health: max_joint_speed must be a positive number of metres per second and \

@@ -161,17 +161,30 @@ impl Fitter<'_> {
             } else {
                 Vec::new()
             };
-            let targets = Targets {
-                pulls: pulls(&pairs, posed.len(), obs),
-                planes,
-            };
+            let mut pulls = pulls(&pairs, posed.len(), obs);
+            if let Some((predicted, weight)) = &prepared.prior {
+                // Point pulls count POINT_SHARE in the held energy.
+                let w = weight / super::POINT_SHARE;
+                let mut merged: Vec<(u32, f64, Vector3<f64>)> = predicted
+                    .iter()
+                    .enumerate()
+                    .map(|(v, c)| (v as u32, w, *c))
+                    .collect();
+                for (v, wv, c) in pulls {
+                    let m = &mut merged[v as usize];
+                    m.2 = (m.2 * m.1 + c * wv) / (m.1 + wv);
+                    m.1 += wv;
+                }
+                pulls = merged;
+            }
+            let targets = Targets { pulls, planes };
             self.bookkeeping(&pairs, targets, &rho_c, obs)
         })
     }
 
     /// The thinned model posed at `pose`, and its normals (each turned with its vertex's
     /// dominant bone).
-    fn posed_sample(&self, pose: &Pose) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
+    pub(super) fn posed_sample(&self, pose: &Pose) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
         let m = &self.sample;
         let bones = PosedBones::new(&m.skeleton, pose);
         let posed = pose_vertices(&bones, &m.mesh.vertices, &m.weights);

@@ -125,7 +125,14 @@ pub fn track(
     let t0 = model.skeleton.reference_frame;
     let seq = ctx.sequence;
     let mut fitter = Fitter::new(model, params.clone());
-    fitter.max_joint_step = Some(params.health.max_joint_speed / ctx.config.export.frame_rate);
+    let frame_rate = ctx.config.export.frame_rate;
+    fitter.max_joint_step = Some(params.health.max_joint_speed / frame_rate);
+    // The motion prior belongs to the proposed method's energy; the baselines stay the
+    // methods the paper compares.
+    if params.method == crate::fit::Method::Proposed {
+        fitter.motion_prior =
+            crate::fit::params::motion_prior_weight(params.motion_prior_acceleration, frame_rate);
+    }
     fitter.photo_consistent = seq.has_frames;
     let mut tracker = Tracker::new(fitter);
     for &frame in frames {

@@ -208,7 +208,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::Tracked,
         about: "robust articulated fitting of the body model to every frame, tracked from t0",
         inputs: &["reliability", "model"],
-        format_version: 8,
+        format_version: 9,
         params: |c| crate::yaml::to_string(&c.fit).unwrap_or_default(),
         sources: fit::sources,
         compute: Compute::Tracked(fit::compute),
