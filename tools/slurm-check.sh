@@ -63,8 +63,8 @@ log "sharded joints.csv is identical to the local run's"
 log "3. cancel array task 1 midway, then resubmit"
 CANCEL=$(make_copy cancel)
 read -r A B <<<"$(submit "$CANCEL")"
-# Task 1 holds frames 2..3: cancel it once its first hull is cached (silhouettes and one
-# hull done, the rest not yet).
+# Task 1 holds frames 2..3: cancel it once its first hull is cached (frame 2's silhouettes
+# and hull done, its reliability not yet; the per-frame stages run frame by frame).
 deadline=$(( $(date +%s) + TIMEOUT ))
 until [ -e "$CANCEL/cache/visual_hull/000002.manifest.yaml" ]; do
   [ "$(date +%s)" -lt "$deadline" ] || die "task 1 never started"
@@ -81,7 +81,8 @@ state=$(job_state "$B2")
 [ "$state" = "COMPLETED " ] || { cat "$CANCEL"/cache/slurm/*.out; die "resubmitted final job $B2 ended $state"; }
 task1="$CANCEL/cache/slurm/frames-${A2}_1.out"
 cat "$task1"
-grep -Eq 'silhouette: 0 computed, 2 reused' "$task1" || die "the resubmitted task 1 recomputed its silhouettes"
+grep -Eq 'silhouette: [01] computed, [12] reused' "$task1" || die "the resubmitted task 1 recomputed frame 2's silhouettes"
+grep -Eq 'visual_hull: [01] computed, [12] reused' "$task1" || die "the resubmitted task 1 recomputed frame 2's hull"
 grep -Eq 'reliability: 2 computed, 0 reused' "$task1" || die "the resubmitted task 1 did not compute the rest"
 for k in 0 2; do
   grep -Eq 'reliability: 0 computed, 2 reused' "$CANCEL/cache/slurm/frames-${A2}_$k.out" \
