@@ -510,30 +510,28 @@ impl StageRun<'_> {
         let done: Vec<Vec<Option<Computed>>> = frames
             .par_iter()
             .map(|&f| {
-                let mut out = Vec::with_capacity(group.len());
-                for (k, &(stage, _)) in group.iter().enumerate() {
-                    if pending[k].todo.binary_search(&f).is_err() {
-                        out.push(None);
-                        continue;
-                    }
-                    let Compute::Frame(compute) = stage.compute else {
-                        unreachable!("a per-frame stage computes frames")
-                    };
-                    let t = Instant::now();
-                    let result = compute(self.ctx, f);
-                    let seconds = t.elapsed().as_secs_f64();
-                    let result = result.and_then(|o| {
+                let stages = || -> Result<Vec<Option<Computed>>> {
+                    let mut out = Vec::with_capacity(group.len());
+                    for (k, &(stage, _)) in group.iter().enumerate() {
+                        if pending[k].todo.binary_search(&f).is_err() {
+                            out.push(None);
+                            continue;
+                        }
+                        let Compute::Frame(compute) = stage.compute else {
+                            unreachable!("a per-frame stage computes frames")
+                        };
+                        let t = Instant::now();
+                        let o = compute(self.ctx, f)?;
+                        let seconds = t.elapsed().as_secs_f64();
                         self.commit(stage, f, o.files, seconds)?;
-                        Ok(o.warnings)
-                    });
-                    if result.is_err() {
-                        self.ctx.forget_frame_images(f);
+                        out.push(Some((o.warnings, seconds)));
+                        bars[k].inc(1);
                     }
-                    out.push(Some((result?, seconds)));
-                    bars[k].inc(1);
-                }
+                    Ok(out)
+                };
+                let out = stages();
                 self.ctx.forget_frame_images(f);
-                Ok(out)
+                out
             })
             .collect::<Result<_>>()?;
         bars.iter().for_each(ProgressBar::finish_and_clear);

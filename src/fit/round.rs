@@ -161,23 +161,10 @@ impl Fitter<'_> {
             } else {
                 Vec::new()
             };
-            let mut pulls = pulls(&pairs, posed.len(), obs);
-            if let Some((predicted, weight)) = &prepared.prior {
-                // Point pulls count POINT_SHARE in the held energy.
-                let w = weight / super::POINT_SHARE;
-                let mut merged: Vec<(u32, f64, Vector3<f64>)> = predicted
-                    .iter()
-                    .enumerate()
-                    .map(|(v, c)| (v as u32, w, *c))
-                    .collect();
-                for (v, wv, c) in pulls {
-                    let m = &mut merged[v as usize];
-                    m.2 = (m.2 * m.1 + c * wv) / (m.1 + wv);
-                    m.1 += wv;
-                }
-                pulls = merged;
-            }
-            let targets = Targets { pulls, planes };
+            let targets = Targets {
+                pulls: pulls(&pairs, posed.len(), obs, prepared.prior.as_ref()),
+                planes,
+            };
             self.bookkeeping(&pairs, targets, &rho_c, obs)
         })
     }
@@ -275,8 +262,15 @@ impl Fitter<'_> {
 
 /// Each of the `n` model vertices' pulls: its own pair, then the observed vertices whose
 /// nearest it is, in their order (a counting sort), summed vertex by vertex in parallel;
-/// each vertex's sum runs in the same order as one pass over the pairs.
-fn pulls(w: &Weighed, n: usize, obs: &Observation) -> Vec<(u32, f64, Vector3<f64>)> {
+/// each vertex's sum runs in the same order as one pass over the pairs. With the motion
+/// prior (each vertex's predicted position and the prior's weight), every vertex is also
+/// pulled towards its prediction.
+fn pulls(
+    w: &Weighed,
+    n: usize,
+    obs: &Observation,
+    prior: Option<&(Vec<Vector3<f64>>, f64)>,
+) -> Vec<(u32, f64, Vector3<f64>)> {
     let mut starts = vec![0u32; n + 1];
     for (&(v, _), &(wt, _)) in w.backward.iter().zip(&w.backward_weights) {
         if pulls_on(wt) {
@@ -312,10 +306,23 @@ fn pulls(w: &Weighed, n: usize, obs: &Observation) -> Vec<(u32, f64, Vector3<f64
             (total, sum)
         })
         .unzip();
-    (0..n)
-        .filter(|&v| w_sum[v] > 0.0)
-        .map(|v| (v as u32, w_sum[v], target[v] / w_sum[v]))
-        .collect()
+    let data = (0..n).map(|v| (v as u32, w_sum[v], target[v] / w_sum[v]));
+    match prior {
+        None => data.filter(|p| p.1 > 0.0).collect(),
+        Some((predicted, weight)) => {
+            // Point pulls count POINT_SHARE in the held energy.
+            let w = weight / super::POINT_SHARE;
+            data.zip(predicted)
+                .map(|((v, wv, c), p)| {
+                    if wv > 0.0 {
+                        (v, w + wv, (p * w + c * wv) / (w + wv))
+                    } else {
+                        (v, w, *p)
+                    }
+                })
+                .collect()
+        }
+    }
 }
 
 /// Each weighted pair as a plane: a model vertex's own pair through its observed partner's

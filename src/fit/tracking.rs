@@ -108,12 +108,12 @@ impl Fitter<'_> {
         if let (Some(before), true) = (before, self.motion_prior > 0.0) {
             // Each thinned model vertex where constant velocity takes it: 2 x(t-1) - x(t-2).
             let (last, earlier) = (self.posed_sample(previous).0, self.posed_sample(before).0);
-            let predicted = last
+            let targets = last
                 .iter()
                 .zip(&earlier)
                 .map(|(a, b)| 2.0 * a - b)
                 .collect();
-            prepared.prior = Some((predicted, self.motion_prior));
+            prepared.prior = Some((targets, self.motion_prior));
         }
         let (first, second) = match (&predicted, p.start) {
             (Some(pred), Start::Predicted) => (pred.clone(), Some(previous.clone())),

@@ -26,15 +26,15 @@ pub fn farthest_around(depth: &[f32], width: usize, height: usize, x: f64, y: f6
 /// Which cameras see a surface point: the rule of the reliability stage and of the
 /// photo-consistency refinement.
 pub struct Visibility<'a> {
-    pub cams: &'a [Camera],
+    cams: &'a [Camera],
     centres: Vec<nalgebra::Vector3<f64>>,
     /// The cameras' depth maps of the surface itself ([`depth_maps`]).
-    pub depth: &'a [Vec<f32>],
+    depth: &'a [Vec<f32>],
     /// Cosine of the largest angle between the normal and the direction to a camera.
-    pub cos_max: f64,
+    cos_max: f64,
     /// How much closer than the point a depth map may be before it counts as hidden,
     /// metres.
-    pub tolerance: f64,
+    tolerance: f64,
 }
 
 impl<'a> Visibility<'a> {

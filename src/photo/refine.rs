@@ -36,6 +36,9 @@ pub struct RefineSettings {
     /// How much closer than the vertex a depth map may be before it counts as hidden,
     /// voxels.
     pub depth_tolerance: f64,
+    /// Gaussian smoothing of the grey images the patches are sampled in, pixels (the
+    /// caller smooths them).
+    pub image_sigma: f64,
 }
 
 impl RefineSettings {
@@ -49,6 +52,7 @@ impl RefineSettings {
             patch_spacing: 0.5,
             max_view_angle_deg: 60.0,
             depth_tolerance: 1.5,
+            image_sigma: 0.6,
         }
     }
 }

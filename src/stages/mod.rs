@@ -31,8 +31,11 @@ pub struct Context<'a> {
     /// Grey images of the frames being computed, decoded once and shared by a frame's
     /// stages (the graph cut and the reliability stage), when the runner asks for it; it
     /// drops a frame's images when the frame's last stage is done.
-    frame_images: Option<Mutex<HashMap<u32, Arc<Vec<GreyImage>>>>>,
+    frame_images: Option<FrameImages>,
 }
+
+/// Grey images kept per frame ([`Context::sharing_frame_images`]).
+type FrameImages = Mutex<HashMap<u32, Arc<Vec<GreyImage>>>>;
 
 impl<'a> Context<'a> {
     pub fn new(config: &'a Config, sequence: &'a Sequence, cache: &'a Cache) -> Context<'a> {
@@ -532,23 +535,23 @@ pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Ve
 /// The frame's images as grey: decoded, or kept from an earlier stage of the frame
 /// ([`Context::sharing_frame_images`]).
 fn grey_frames(ctx: &Context, frame: u32) -> Result<Arc<Vec<GreyImage>>> {
-    let lock = |m: &'_ Mutex<HashMap<u32, Arc<Vec<GreyImage>>>>| {
-        m.lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .get(&frame)
-            .cloned()
-    };
-    if let Some(kept) = ctx.frame_images.as_ref().and_then(lock) {
-        return Ok(kept);
+    fn kept(m: &FrameImages) -> std::sync::MutexGuard<'_, HashMap<u32, Arc<Vec<GreyImage>>>> {
+        m.lock().unwrap_or_else(|e| e.into_inner())
+    }
+    if let Some(grey) = ctx
+        .frame_images
+        .as_ref()
+        .and_then(|m| kept(m).get(&frame).cloned())
+    {
+        return Ok(grey);
     }
     let frames: Vec<image::RgbImage> = (0..ctx.sequence.cameras.len())
         .into_par_iter()
         .map(|c| ctx.sequence.load_frame(c, frame))
         .collect::<Result<_>>()?;
     let grey = Arc::new(crate::photo::grey(&frames));
-    if let Some(kept) = &ctx.frame_images {
-        let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
-        kept.insert(frame, grey.clone());
+    if let Some(m) = &ctx.frame_images {
+        kept(m).insert(frame, grey.clone());
     }
     Ok(grey)
 }
@@ -673,7 +676,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         let settings = RefineSettings::with_search(p.photo_refine);
         let smoothed: Vec<GreyImage> = images
             .par_iter()
-            .map(|g| g.blurred(reliability::ReliabilityParams::default().image_sigma))
+            .map(|g| g.blurred(settings.image_sigma))
             .collect();
         refine_along_normals(cams, &smoothed, &mut mesh, grid.voxel, &settings);
     }
