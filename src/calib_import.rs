@@ -35,7 +35,7 @@ enum CvValue {
     Matrix {
         rows: usize,
         cols: usize,
-        #[allow(dead_code)]
+        /// Element type (`d` for the doubles calibrations hold).
         dt: String,
         data: Vec<f64>,
     },
@@ -70,6 +70,8 @@ fn read_file_storage(path: &Path) -> Result<BTreeMap<String, CvValue>> {
     let mut cleaned = String::with_capacity(text.len());
     for (i, line) in text.lines().enumerate() {
         if i == 0 && line.trim_start().starts_with("%YAML") {
+            // An empty line in its place keeps the line numbers of messages right.
+            cleaned.push('\n');
             continue;
         }
         cleaned.push_str(&line.replace("!!opencv-matrix", ""));
@@ -78,7 +80,46 @@ fn read_file_storage(path: &Path) -> Result<BTreeMap<String, CvValue>> {
     if cleaned.trim().is_empty() || cleaned.trim() == "---" {
         return Err(Error::invalid(path, "the file is empty"));
     }
-    crate::yaml::from_str(path, &cleaned)
+    // Each entry on its own, so that an entry of no known shape is named with its line
+    // (an untagged enum's own error names neither).
+    let raw: BTreeMap<String, serde_yaml_ng::Value> = crate::yaml::from_str(path, &cleaned)?;
+    let mut out = BTreeMap::new();
+    for (key, value) in raw {
+        // Only for a message: a scan of the text.
+        let line = || {
+            cleaned
+                .lines()
+                .position(|l| l.trim_start().starts_with(&format!("{key}:")))
+                .map_or(String::new(), |i| format!("line {}: ", i + 1))
+        };
+        let entry: CvValue = serde_yaml_ng::from_value(value).map_err(|_| {
+            Error::invalid(
+                path,
+                format!(
+                    "{}entry '{}' is neither a matrix (rows, cols, dt, data), a number, a \
+                     list of names nor text",
+                    line(),
+                    crate::yaml::shorten(&key)
+                ),
+            )
+        })?;
+        if let CvValue::Matrix { dt, .. } = &entry {
+            if !matches!(dt.as_str(), "u" | "c" | "w" | "s" | "i" | "f" | "d") {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "{}matrix '{}' has dt '{}'; OpenCV's element types are u, c, w, s, \
+                         i, f and d",
+                        line(),
+                        crate::yaml::shorten(&key),
+                        crate::yaml::shorten(dt)
+                    ),
+                ));
+            }
+        }
+        out.insert(key, entry);
+    }
+    Ok(out)
 }
 
 /// A matrix entry `key` of a FileStorage map, checked to hold `len` values.
@@ -381,6 +422,7 @@ pub fn from_colmap(dir: &Path) -> Result<Imported> {
     let text = crate::fsutil::read_to_string(&images_path)?;
     let lines = colmap_lines(&text);
     let mut cameras: Vec<Camera> = Vec::new();
+    let mut names = std::collections::HashSet::new();
     let mut warnings = Vec::new();
     // Two lines per image: the pose line, then the 2D points (possibly blank).
     let mut i = 0;
@@ -412,7 +454,7 @@ pub fn from_colmap(dir: &Path) -> Result<Imported> {
         let image = f[9..].join(" ");
         let name = colmap_camera_name(&image);
         check_name(&name).map_err(|m| bad(format!("image '{image}': {m}")))?;
-        if cameras.iter().any(|c| c.name == name) {
+        if !names.insert(name.clone()) {
             return Err(bad(format!(
                 "two images map to camera '{name}'; give each camera's image its own folder \
                  or file name (one image per camera)"

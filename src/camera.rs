@@ -21,6 +21,9 @@ pub const ROTATION_TOLERANCE: f64 = 1e-6;
 /// about 1e-6 off): it is replaced by the nearest rotation, with a warning.
 pub const ROUNDED_ROTATION_TOLERANCE: f64 = 1e-4;
 
+/// The largest camera translation accepted, metres.
+pub const MAX_TRANSLATION: f64 = 1e4;
+
 /// One calibrated camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Camera {
@@ -240,6 +243,43 @@ impl Camera {
             && px.y < self.height as f64 - 0.5
     }
 
+    /// Where the radial distortion r (1 + k1 r^2 + k2 r^4 + k3 r^6) stops increasing before
+    /// it reaches the image's corners (a lens model that folds the image onto itself), as
+    /// the distorted normalized radius; `None` when it is one-to-one over the image.
+    fn fold_radius(&self) -> Option<f64> {
+        let [k1, k2, _, _, k3] = self.dist;
+        if k1 >= 0.0 && k2 >= 0.0 && k3 >= 0.0 {
+            return None;
+        }
+        let (w, h) = (self.width as f64, self.height as f64);
+        let corner = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
+            .iter()
+            .map(|&(x, y)| {
+                let ny = (y - self.cy) / self.fy;
+                Vector2::new((x - self.cx - self.skew * ny) / self.fx, ny).norm()
+            })
+            .fold(0.0, f64::max);
+        let radial = |r: f64| r * (1.0 + r * r * (k1 + r * r * (k2 + r * r * k3)));
+        let slope = |r: f64| {
+            let r2 = r * r;
+            1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + 7.0 * r2 * k3))
+        };
+        // Walk the undistorted radius out until the image's corner is reached.
+        let steps = 2000;
+        let step = 4.0 * corner / steps as f64;
+        for i in 1..=steps {
+            let r = i as f64 * step;
+            if slope(r) <= 0.0 {
+                return Some(radial(r));
+            }
+            if radial(r) >= corner {
+                return None;
+            }
+        }
+        // The corners are never reached: the distortion shrinks the image by 4x or more.
+        Some(radial(4.0 * corner))
+    }
+
     /// Checks the values a calibration must satisfy; the message names what is wrong.
     pub fn validate(&self) -> std::result::Result<(), String> {
         if self.width == 0 || self.height == 0 {
@@ -260,6 +300,53 @@ impl Camera {
             return Err(format!(
                 "focal lengths must be positive (fx = {}, fy = {})",
                 self.fx, self.fy
+            ));
+        }
+        // Plausible ranges: absurd numbers pass every other test and make a camera that
+        // silently sees nothing.
+        let side = self.width.max(self.height) as f64;
+        for (what, f) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(f >= 0.001 * side && f <= 1000.0 * side) {
+                return Err(format!(
+                    "{what} = {f} pixels is outside 0.001 to 1000 times the image's longer side \
+                     ({side} pixels); focal lengths are in pixels"
+                ));
+            }
+        }
+        if self.skew.abs() > self.fx.max(self.fy) {
+            return Err(format!(
+                "the skew K[0][1] = {} is larger than the focal length; it is 0 for most cameras",
+                self.skew
+            ));
+        }
+        let (w, h) = (self.width as f64, self.height as f64);
+        if !(-w..=2.0 * w).contains(&self.cx) || !(-h..=2.0 * h).contains(&self.cy) {
+            return Err(format!(
+                "the principal point ({}, {}) lies far outside the {}x{} image (it is near the \
+                 image centre for most cameras)",
+                self.cx, self.cy, self.width, self.height
+            ));
+        }
+        if self.t.norm() > MAX_TRANSLATION {
+            return Err(format!(
+                "|t| = {:.0} is over {MAX_TRANSLATION} m: t is in metres (millimetres would be \
+                 1000 times too large)",
+                self.t.norm()
+            ));
+        }
+        if self.dist.iter().any(|d| d.abs() > 1e3) {
+            return Err(format!(
+                "dist {:?} holds a coefficient over 1000 in size; expected [k1, k2, p1, p2, k3]",
+                self.dist
+            ));
+        }
+        if let Some(r) = self.fold_radius() {
+            return Err(format!(
+                "dist {:?} folds the image: the radial distortion stops growing {:.0} pixels from \
+                 the principal point, inside the image, so two directions would meet at one \
+                 pixel; check the coefficients and their order [k1, k2, p1, p2, k3]",
+                self.dist,
+                r * self.fx.min(self.fy)
             ));
         }
         let ortho = (self.r * self.r.transpose() - Matrix3::identity())
@@ -303,6 +390,14 @@ pub struct Calibration {
 /// The longest camera or bone name, bytes.
 pub const MAX_NAME_BYTES: usize = 100;
 
+/// Unicode format characters that render as nothing or reorder text (bidirectional
+/// overrides and isolates, zero-width characters, the byte-order mark, soft hyphen).
+fn invisible(c: char) -> bool {
+    matches!(c,
+        '\u{00AD}' | '\u{061C}' | '\u{180E}' | '\u{200B}'..='\u{200F}' | '\u{202A}'..='\u{202E}'
+        | '\u{2060}'..='\u{2064}' | '\u{2066}'..='\u{206F}' | '\u{FEFF}' | '\u{FFF9}'..='\u{FFFB}')
+}
+
 /// Camera names become folder names: refuse anything that is not a plain file name.
 pub fn check_name(name: &str) -> std::result::Result<(), String> {
     if name.is_empty() {
@@ -317,6 +412,20 @@ pub fn check_name(name: &str) -> std::result::Result<(), String> {
     }
     if name.chars().any(|c| c.is_control()) {
         return Err(format!("the name {name:?} contains control characters"));
+    }
+    // Invisible or reordering characters make two names look alike, or a name look like
+    // another (U+202E shows the rest of a line backwards).
+    if let Some(c) = name.chars().find(|&c| invisible(c)) {
+        return Err(format!(
+            "the name {:?} contains the invisible character U+{:04X}; use letters, digits, '_' \
+             and '-'",
+            name, c as u32
+        ));
+    }
+    if name.trim() != name || name.trim().is_empty() {
+        return Err(format!(
+            "the name {name:?} is blank or starts or ends with white space"
+        ));
     }
     // Names become file names (`<name>.png`, `<name>.tmp-...`): well under the usual
     // 255-byte limit.
@@ -357,6 +466,7 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
         return Err(Error::invalid(path, "the calibration lists no camera"));
     }
     let mut seen = HashSet::new();
+    let mut poses = std::collections::HashMap::new();
     let mut warnings = Vec::new();
     let mut cameras = Vec::with_capacity(file.cameras.len());
     for e in file.cameras {
@@ -417,6 +527,21 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
             ));
         }
         cam.validate().map_err(&bad)?;
+        // A copied entry: the same pose twice adds nothing and hides a missing camera.
+        let pose: Vec<u64> = cam
+            .r
+            .iter()
+            .chain(cam.t.iter())
+            .map(|v| v.to_bits())
+            .collect();
+        if let Some(twin) = poses.insert(pose, cameras.len()) {
+            let twin: &Camera = &cameras[twin];
+            return Err(bad(format!(
+                "has the same position and orientation as camera '{}' (a copied entry?); each \
+                 camera needs its own R and t",
+                twin.name.escape_debug()
+            )));
+        }
         cameras.push(cam);
     }
     Ok(Calibration { cameras, warnings })
@@ -459,6 +584,60 @@ pub fn cameras_to_yaml(cameras: &[Camera]) -> String {
 /// Writes cameras.yaml atomically.
 pub fn write_cameras(path: &Path, cameras: &[Camera]) -> Result<()> {
     crate::fsutil::write_atomic(path, cameras_to_yaml(cameras).as_bytes())
+}
+
+/// The point the cameras look at: the least-squares nearest point to their optical axes
+/// (lines through each centre along its viewing direction); `None` when the axes are
+/// (nearly) parallel, as for a stereo pair.
+pub fn common_target(cams: &[Camera]) -> Option<Vector3<f64>> {
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    for c in cams {
+        let d = c.r.row(2).transpose();
+        let p = Matrix3::identity() - d * d.transpose();
+        a += p;
+        b += p * c.centre();
+    }
+    let eig = a.symmetric_eigen();
+    if eig.eigenvalues.min() < 0.05 * cams.len() as f64 {
+        return None;
+    }
+    a.try_inverse().map(|inv| inv * b)
+}
+
+/// Refuses a camera that does not look at the point the cameras look at together
+/// ([`common_target`]): it faces away from it, or it projects more than an image's size
+/// outside its image (a camera turned around, or with R and t of another convention). The
+/// message names the camera.
+pub fn check_cameras_look_at_the_scene(cams: &[Camera]) -> std::result::Result<(), String> {
+    if cams.len() < 3 {
+        return Ok(());
+    }
+    let Some(target) = common_target(cams) else {
+        return Ok(());
+    };
+    for c in cams {
+        let x = c.to_camera(&target);
+        let shown = format!("({:.2}, {:.2}, {:.2})", target.x, target.y, target.z);
+        if x.z <= 0.0 {
+            return Err(format!(
+                "camera '{}' faces away from the point the cameras look at, {shown}: it sees \
+                 none of the subject; check its R and t (world-to-camera), or remove it",
+                c.name
+            ));
+        }
+        let (w, h) = (c.width as f64, c.height as f64);
+        let u = c.fx * x.x / x.z + c.skew * x.y / x.z + c.cx;
+        let v = c.fy * x.y / x.z + c.cy;
+        if !(-w..=2.0 * w).contains(&u) || !(-h..=2.0 * h).contains(&v) {
+            return Err(format!(
+                "camera '{}' does not see the point the cameras look at, {shown} (it would be at \
+                 pixel ({u:.0}, {v:.0}) of a {}x{} image); check its K, R and t, or remove it",
+                c.name, c.width, c.height
+            ));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

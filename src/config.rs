@@ -151,8 +151,13 @@ impl Config {
             return Err(Error::invalid(
                 path,
                 format!(
-                    "key 'model.mesh': {} does not exist (paths are relative to the pipeline file)",
-                    mesh.display()
+                    "key 'model.mesh': {} {}",
+                    mesh.display(),
+                    if std::fs::symlink_metadata(mesh).is_ok() {
+                        "is not a regular file (a device, FIFO, folder or broken link); give a PLY or OBJ file"
+                    } else {
+                        "does not exist (paths are relative to the pipeline file)"
+                    }
                 ),
             ));
         }
@@ -178,26 +183,27 @@ impl Config {
         for (key, place) in [("output", &config.output), ("cache", &config.cache)] {
             let what = format!("{}: key '{key}'", path.display());
             crate::fsutil::check_writable_place(&what, place, &[&config.sequence])?;
+            crate::fsutil::refuse_links_into(
+                &what,
+                place,
+                3,
+                &[&config.sequence, &config.calibration, &config.path],
+            )?;
         }
         Ok(config)
     }
 
-    /// Refuses a file the pipeline is asked to write (`flag` names the option) inside the
-    /// capture's sequence folder or over its calibration file.
+    /// Refuses a file the pipeline is asked to write (`flag` names the option) over the
+    /// pipeline file or the calibration, inside the capture's sequence folder, or over
+    /// something that is not a regular file ([`crate::fsutil::check_output_target`]); an
+    /// existing regular file elsewhere is replaced.
     pub fn check_output_file(&self, flag: &str, file: &Path) -> Result<()> {
-        let inside = crate::fsutil::lies_within(file, &self.sequence);
-        if inside || crate::fsutil::lies_within(file, &self.calibration) {
-            return Err(Error::Usage(format!(
-                "{flag} {}: would overwrite the capture's inputs ({}); write it elsewhere",
-                file.display(),
-                if inside {
-                    self.sequence.display()
-                } else {
-                    self.calibration.display()
-                }
-            )));
-        }
-        Ok(())
+        crate::fsutil::check_output_target(
+            flag,
+            file,
+            &[&self.path, &self.calibration, &self.sequence],
+            true,
+        )
     }
 }
 

@@ -34,6 +34,8 @@ pub struct Sequence {
     pub has_backgrounds: bool,
     /// Things that are odd but not fatal (extra folders, stray files).
     pub warnings: Vec<String>,
+    /// Read as if it had no skeleton.yaml (`pipeline skeleton --force` replacing one).
+    pub skeleton_ignored: bool,
 }
 
 /// The name of frame `index`'s files: the zero-padded six-digit index.
@@ -213,10 +215,23 @@ impl Sequence {
                 .iter()
                 .all(|c| bg_dir.join(format!("{}.png", c.name)).is_file());
         if bg_dir.is_dir() && !has_backgrounds {
-            warnings.push(format!(
-                "{}: not every camera has a background plate <camera>.png; background subtraction is unavailable",
-                bg_dir.display()
-            ));
+            let odd: Vec<String> = cameras
+                .iter()
+                .map(|c| bg_dir.join(format!("{}.png", c.name)))
+                .filter(|p| std::fs::symlink_metadata(p).is_ok() && !p.is_file())
+                .map(|p| p.display().to_string())
+                .collect();
+            warnings.push(if odd.is_empty() {
+                format!(
+                    "{}: not every camera has a background plate <camera>.png; background subtraction is unavailable",
+                    bg_dir.display()
+                )
+            } else {
+                format!(
+                    "{}: not a regular file (a device, FIFO, folder or broken link); background subtraction is unavailable",
+                    odd.join(", ")
+                )
+            });
         }
         let seq = Sequence {
             dir: dir.to_path_buf(),
@@ -227,6 +242,7 @@ impl Sequence {
             has_frames,
             has_backgrounds,
             warnings,
+            skeleton_ignored: false,
         };
         seq.check_image_sizes()?;
         Ok(seq)
@@ -351,17 +367,13 @@ impl Sequence {
             return Ok(None);
         }
         let path = self.mask_path(cam, frame);
-        let mut img = decode(&path, Some(&self.cameras[cam]))?.to_luma8();
-        for p in img.pixels_mut() {
-            p.0[0] = if p.0[0] >= 128 { 255 } else { 0 };
-        }
-        Ok(Some(img))
+        Ok(Some(binary_mask(&decode(&path, Some(&self.cameras[cam]))?)))
     }
 
     /// The skeleton (`skeleton.yaml`), if present.
     pub fn skeleton(&self) -> Result<Option<Skeleton>> {
         let path = self.dir.join("skeleton.yaml");
-        if !path.exists() {
+        if self.skeleton_ignored || std::fs::symlink_metadata(&path).is_err() {
             return Ok(None);
         }
         Skeleton::read(&path).map(Some)
@@ -392,4 +404,30 @@ impl Sequence {
         }
         crate::geometry::ply::read_ply(&path).map(Some)
     }
+}
+
+/// A mask image as the pipeline's binary silhouette (255 subject, 0 background):
+/// - an image with an alpha channel that is not opaque everywhere holds its silhouette in
+///   the alpha (cut-outs saved as RGBA, whose colour channels are the photograph or white);
+/// - otherwise its grey level, 128 and above being the subject, or any non-zero value when
+///   the image holds only the values 0 and 1 (label images written as 0/1).
+pub fn binary_mask(img: &image::DynamicImage) -> image::GrayImage {
+    let (w, h) = (img.width(), img.height());
+    let level: image::GrayImage = if img.color().has_alpha() {
+        let rgba = img.to_rgba8();
+        if rgba.pixels().any(|p| p.0[3] != 255) {
+            image::GrayImage::from_fn(w, h, |x, y| image::Luma([rgba.get_pixel(x, y).0[3]]))
+        } else {
+            img.to_luma8()
+        }
+    } else {
+        img.to_luma8()
+    };
+    let zero_one = level.pixels().all(|p| p.0[0] <= 1);
+    let threshold = if zero_one { 1 } else { 128 };
+    let mut out = level;
+    for p in out.pixels_mut() {
+        p.0[0] = if p.0[0] >= threshold { 255 } else { 0 };
+    }
+    out
 }

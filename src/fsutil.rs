@@ -167,3 +167,78 @@ pub fn check_writable_place(what: &str, place: &Path, inputs: &[&Path]) -> Resul
     }
     Ok(())
 }
+
+/// Checks a file the user names for the pipeline to write (`flag`: the option naming it,
+/// e.g. `--out`): an existing target must be a regular file (never a device, a FIFO, a
+/// folder or a link to one: the write would replace it) and, without `force`, is refused
+/// ("pass --force"); a target that is one of `protected` (the pipeline file, the
+/// calibration, an input of the command) or lies inside one of them (the sequence folder) is
+/// refused whatever `force` says.
+pub fn check_output_target(
+    flag: &str,
+    target: &Path,
+    protected: &[&Path],
+    force: bool,
+) -> Result<()> {
+    for &p in protected {
+        if lies_within(target, p) {
+            return Err(Error::Usage(format!(
+                "{flag} {}: would overwrite {} (an input of this command or of the capture); \
+                 write it elsewhere",
+                target.display(),
+                p.display()
+            )));
+        }
+    }
+    let Ok(meta) = std::fs::symlink_metadata(target) else {
+        return Ok(());
+    };
+    // A link is judged by what it points to (a link to /dev/null is a device).
+    let regular = if meta.file_type().is_symlink() {
+        std::fs::metadata(target).is_ok_and(|m| m.is_file())
+    } else {
+        meta.is_file()
+    };
+    if !regular {
+        return Err(Error::Usage(format!(
+            "{flag} {}: exists and is not a regular file (a folder, device, FIFO or socket, or \
+             a link to one); writing would replace it: give the path of a new or regular file",
+            target.display()
+        )));
+    }
+    if !force {
+        return Err(Error::Usage(format!(
+            "{flag} {}: the file exists; pass --force to replace it",
+            target.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Refuses a symbolic link inside `root` (down to `depth` levels) that leads into one of
+/// `inputs`: writing through it (an `output/export` pointing at the capture's ground truth)
+/// would overwrite an input. `what` names the folder's key.
+pub fn refuse_links_into(what: &str, root: &Path, depth: usize, inputs: &[&Path]) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(root) else {
+        return Ok(());
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let Ok(kind) = entry.file_type() else {
+            continue;
+        };
+        if kind.is_symlink() {
+            if let Some(input) = inputs.iter().find(|i| lies_within(&path, i)) {
+                return Err(Error::Usage(format!(
+                    "{what}: {} is a link into the capture's input {}; writing through it would \
+                     overwrite the capture: remove the link",
+                    path.display(),
+                    input.display()
+                )));
+            }
+        } else if kind.is_dir() && depth > 1 {
+            refuse_links_into(what, &path, depth - 1, inputs)?;
+        }
+    }
+    Ok(())
+}

@@ -26,6 +26,7 @@ pub mod photo;
 pub mod plot;
 pub mod poses;
 pub mod runner;
+pub mod shell;
 pub mod skeleton;
 pub mod slurm;
 pub mod stages;

@@ -174,3 +174,18 @@ pub fn check_image(path: &Path, width: u32, height: u32) -> Result<()> {
 pub fn image_alloc_bytes() -> Result<u64> {
     Ok(IMAGE.limit()?.saturating_mul(4).saturating_add(64 << 20))
 }
+
+/// The most smoothing iterations a mesh may be given (each costs a pass over the mesh; far
+/// beyond a few hundred, Taubin smoothing only burns time).
+pub const MAX_SMOOTHING_ITERATIONS: usize = 1000;
+
+/// Refuses a smoothing iteration count (`key` names it) above [`MAX_SMOOTHING_ITERATIONS`].
+pub fn check_smoothing(key: &str, iterations: usize) -> std::result::Result<(), String> {
+    if iterations > MAX_SMOOTHING_ITERATIONS {
+        return Err(format!(
+            "{key} = {iterations} is over {MAX_SMOOTHING_ITERATIONS}; 10 (the default) suits \
+             most captures"
+        ));
+    }
+    Ok(())
+}

@@ -186,6 +186,9 @@ enum Command {
         /// Image size WIDTHxHEIGHT for OpenCV cameras without W_<name> / H_<name>.
         #[arg(long, value_parser = hullpose::calib_import::parse_size)]
         size: Option<(u32, u32)>,
+        /// Replace an existing file at --out.
+        #[arg(long)]
+        force: bool,
     },
     /// Check a capture against its calibration, with every check `run` makes before its
     /// first stage, and report what it holds.
@@ -230,10 +233,10 @@ enum BenchWhat {
         #[arg(long, default_value_t = 0)]
         frame: u32,
         /// Repetitions; the best time is reported.
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = count::<1, 1000>)]
         repeat: usize,
         /// Carve a fixed N^3 grid (voxel_size from pipeline.yaml) centred on the derived box.
-        #[arg(long)]
+        #[arg(long, value_parser = count::<1, 1024>)]
         cube: Option<usize>,
     },
     /// The graph cut's steps on one frame (needs the frame's hull in the cache).
@@ -244,7 +247,7 @@ enum BenchWhat {
     },
     /// The max-flow solver on the reference fixture graph of size N^3.
     Maxflow {
-        #[arg(long, default_value_t = 64)]
+        #[arg(long, default_value_t = 64, value_parser = count::<2, 256>)]
         size: usize,
     },
     /// The reliability stage's steps on one frame (needs the frame's refined surface in the
@@ -257,7 +260,7 @@ enum BenchWhat {
         /// crate's ZNCC on them.
         #[arg(long)]
         dump_patches: Option<PathBuf>,
-        #[arg(long, default_value_t = 200_000)]
+        #[arg(long, default_value_t = 200_000, value_parser = count::<1, 100_000_000>)]
         pairs: usize,
     },
     /// The fit's steps on one frame (needs the model and the frame's reliability in the
@@ -291,18 +294,30 @@ enum BenchWhat {
     /// k-d tree nearest-neighbour queries per second (compare tools/bench_fit.py), and the
     /// fit's bounded two-nearest search by the k-d tree and by the cell grid side by side
     Nearest {
-        #[arg(long, default_value_t = 100_000)]
+        #[arg(long, default_value_t = 100_000, value_parser = count::<1, 100_000_000>)]
         points: usize,
-        #[arg(long, default_value_t = 1_000_000)]
+        #[arg(long, default_value_t = 1_000_000, value_parser = count::<1, 1_000_000_000>)]
         queries: usize,
     },
     /// Iso-surface extraction of a sphere on an N^3 grid.
     Meshing {
-        #[arg(long, default_value_t = 256)]
+        #[arg(long, default_value_t = 256, value_parser = count::<2, 1024>)]
         size: usize,
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = count::<1, 1000>)]
         repeat: usize,
     },
+}
+
+/// A count from `MIN` to `MAX` (bench sizes: beyond them a run would exhaust memory).
+fn count<const MIN: usize, const MAX: usize>(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a whole number"))?;
+    if !(MIN..=MAX).contains(&n) {
+        return Err(format!("{n} is outside {MIN}..={MAX}"));
+    }
+    Ok(n)
 }
 
 fn parse_range(s: &str) -> Result<FrameRange, String> {
@@ -430,12 +445,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     last.display(),
                     plan.final_script
                 );
+                let q = |p: &std::path::Path| hullpose::shell::quote(&p.display().to_string());
                 println!(
-                    "# submit with: jobid=$(sbatch --parsable {}) && sbatch --dependency=afterok:$jobid {}",
-                    array.display(),
-                    last.display()
+                    "# submit with: jobid=$(sbatch --parsable {}) && sbatch --dependency=afterok:\"$jobid\" {}",
+                    q(&array),
+                    q(&last)
                 );
-                println!("# or run: pipeline slurm {} --submit", file.display());
+                println!("# or run: pipeline slurm {} --submit", q(&file));
             }
         }
         Command::Ablation { file, frames } => {
@@ -615,7 +631,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             paths,
             out,
             size,
+            force,
         } => {
+            // Refused before reading: never over the command's own inputs, a device or a
+            // FIFO, and an existing file only with --force.
+            let inputs: Vec<&std::path::Path> = paths.iter().map(|p| p.as_path()).collect();
+            hullpose::fsutil::check_output_target("--out", &out, &inputs, force)?;
             let imported = match (from, paths.as_slice()) {
                 (CalibSource::Opencv, [intri, extri]) => {
                     hullpose::calib_import::from_opencv(intri, extri, size)?
@@ -648,7 +669,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             frame,
             force,
         } => {
-            let job = Job::load(Config::load(&file)?, None)?;
+            let mut job = Job::load(Config::load(&file)?, None)?;
+            // --force replaces whatever skeleton.yaml holds, valid or not: it is not read.
+            job.sequence.skeleton_ignored = force;
             let template = hullpose::autoskeleton::Template::parse(&template);
             let w = hullpose::autoskeleton::make(&job, &template, frame, force)?;
             println!(
@@ -675,7 +698,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let job = Job::load(Config::load(&file)?, None)?;
             job.validate()?;
             let seq = &job.sequence;
-            for w in &seq.warnings {
+            for w in seq.warnings.iter().chain(&job.inspect_masks()?) {
                 eprintln!("warning: {w}");
             }
             let skeleton = seq.skeleton()?;

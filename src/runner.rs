@@ -119,6 +119,10 @@ impl Job {
             crate::limits::check_image(calibration, cam.width, cam.height)
                 .map_err(|e| Error::Usage(format!("camera '{}': {e}", cam.name)))?;
         }
+        crate::camera::check_cameras_look_at_the_scene(cameras)
+            .map_err(|m| Error::invalid(calibration, m))?;
+        crate::stages::visual_hull::validate_for_cameras(&self.config.visual_hull, cameras.len())
+            .map_err(|m| Error::invalid(&self.config.path, m))?;
         self.reference_frame()?;
         for name in &self.config.export.overlay_cameras {
             crate::overlay::camera_index(&self.sequence, calibration, name).map_err(|e| {
@@ -126,6 +130,46 @@ impl Job {
             })?;
         }
         Ok(())
+    }
+
+    /// What the given masks of the first selected frame say before any stage runs (for
+    /// `pipeline check`): cameras whose mask is empty or covers the whole image. Refused
+    /// when every camera's mask covers the whole image (the hull would be the whole box).
+    pub fn inspect_masks(&self) -> Result<Vec<String>> {
+        let seq = &self.sequence;
+        let Some(&frame) = self.frames.first() else {
+            return Ok(Vec::new());
+        };
+        if !seq.has_masks {
+            return Ok(Vec::new());
+        }
+        let mut masks = Vec::with_capacity(seq.cameras.len());
+        for c in 0..seq.cameras.len() {
+            if let Some(m) = seq.load_mask(c, frame)? {
+                masks.push(m);
+            }
+        }
+        let cov = crate::stages::silhouette::Coverage::of(&seq.cameras, &masks);
+        let mut out = Vec::new();
+        if !cov.full.is_empty() {
+            let message = format!(
+                "masks of frame {frame}: camera(s) {} cover the whole image, so they carve \
+                 nothing (inverted, or all white? the subject is 255, the background 0)",
+                cov.full.join(", ")
+            );
+            if cov.full.len() + self.config.visual_hull.all_but >= seq.cameras.len() {
+                return Err(Error::invalid(seq.dir.join("masks"), message));
+            }
+            out.push(message);
+        }
+        if !cov.empty.is_empty() {
+            out.push(format!(
+                "masks of frame {frame}: camera(s) {} hold no subject pixel, so that frame's hull \
+                 will be empty (masks are 255 or 1 on the subject, 0 elsewhere)",
+                cov.empty.join(", ")
+            ));
+        }
+        Ok(out)
     }
 
     pub fn reference_frame(&self) -> Result<Option<u32>> {

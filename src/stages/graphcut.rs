@@ -136,13 +136,17 @@ pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
         || p.ballooning < 0.0
         || p.ballooning_evidence.is_some_and(f64::is_nan)
         || p.best_pairs == 0
+        || !(p.patch_spacing > 0.0 && p.patch_spacing <= 10.0)
+        || !(p.max_pair_angle_deg > 0.0 && p.max_pair_angle_deg <= 180.0)
     {
         return Err(
             "graphcut: sigma must be positive, ballooning not negative, ballooning_evidence a \
-             number, best_pairs at least 1"
+             number, best_pairs at least 1, patch_spacing in (0, 10] voxels and \
+             max_pair_angle_deg in (0, 180]"
                 .into(),
         );
     }
+    crate::limits::check_smoothing("graphcut.smoothing_iterations", p.smoothing_iterations)?;
     Ok(())
 }
 

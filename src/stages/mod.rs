@@ -5,6 +5,7 @@
 //! [`StageDef`] adapters here do the file handling around them.
 
 pub mod fit;
+pub mod fit_state;
 pub mod graphcut;
 pub mod model;
 pub mod reliability;
@@ -211,8 +212,15 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::Tracked,
         about: "robust articulated fitting of the body model to every frame, tracked from t0",
         inputs: &["reliability", "model"],
-        format_version: 9,
-        params: |c| crate::yaml::to_string(&c.fit).unwrap_or_default(),
+        format_version: 10,
+        // The fit reads the frame rate (the motion prior's weight, the joint-speed check).
+        params: |c| {
+            format!(
+                "{}frame_rate: {:e}\n",
+                crate::yaml::to_string(&c.fit).unwrap_or_default(),
+                c.export.frame_rate
+            )
+        },
         sources: fit::sources,
         compute: Compute::Tracked(fit::compute),
         finish: Some(fit::finish),
@@ -359,11 +367,26 @@ pub fn load_hull_on_cones(ctx: &Context, frame: u32, sdf: &[f32]) -> Result<Vec<
 fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let masks = load_silhouettes(ctx, frame)?;
     let p = &ctx.config.visual_hull;
+    let mut warnings = Vec::new();
+    let coverage = silhouette::Coverage::of(&ctx.sequence.cameras, &masks);
+    if !coverage.full.is_empty() {
+        let message = format!(
+            "frame {frame}: the silhouette of camera(s) {} covers the whole image, so it carves \
+             nothing (masks inverted, or all white? the subject is 255, the background 0)",
+            coverage.full.join(", ")
+        );
+        if coverage.full.len() + p.all_but >= ctx.sequence.cameras.len() {
+            return Err(Error::invalid(
+                &ctx.sequence.dir,
+                format!("{message}; with every camera so the hull would fill the whole box"),
+            ));
+        }
+        warnings.push(message);
+    }
     let hull = visual_hull::reconstruct(&ctx.sequence.cameras, &masks, p).map_err(|m| {
         Error::invalid(&ctx.config.path, format!("visual_hull, frame {frame}: {m}"))
     })?;
     let dir = ctx.cache.stage_dir("visual_hull");
-    let mut warnings = Vec::new();
     let (mesh, grid_data, band) = match &hull {
         Some(h) => (
             h.mesh.clone(),
@@ -372,7 +395,8 @@ fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
         ),
         None => {
             warnings.push(format!(
-                "frame {frame}: the silhouettes leave no volume (subject out of view?); the hull is empty"
+                "frame {frame}: the hull is empty: {}",
+                coverage.why_empty()
             ));
             (
                 TriMesh::default(),
@@ -420,6 +444,15 @@ fn write_reconstruction(
 }
 
 /// Loads the silhouettes of a frame from the cache (for downstream stages and tests).
+/// Why `frame`'s hull is empty, from its silhouettes (for the model's and the skeleton's
+/// errors, which meet the empty surface later).
+pub fn why_hull_is_empty(ctx: &Context, frame: u32) -> String {
+    match load_silhouettes(ctx, frame) {
+        Ok(masks) => silhouette::Coverage::of(&ctx.sequence.cameras, &masks).why_empty(),
+        Err(e) => format!("its silhouettes cannot be read ({e})"),
+    }
+}
+
 pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImage>> {
     let dir = ctx.cache.stage_dir("silhouette");
     ctx.sequence

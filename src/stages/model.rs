@@ -203,6 +203,11 @@ pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
             .mesh
             .clone()
             .unwrap_or_else(|| skeleton_path.clone());
+        let m = if mesh.vertices.is_empty() {
+            format!("{m}: {}", super::why_hull_is_empty(ctx, frame))
+        } else {
+            m
+        };
         Error::invalid(&source, format!("model (reference frame {frame}): {m}"))
     })?;
     let dir = ctx.cache.stage_dir("model");

@@ -321,3 +321,49 @@ mod tests {
         assert_eq!(cleaned.get_pixel(12, 112).0[0], 0, "the floor blob is gone");
     }
 }
+
+/// Which cameras' silhouettes of a frame are empty or cover (nearly) the whole image.
+#[derive(Debug, Default)]
+pub struct Coverage {
+    /// Cameras without a single subject pixel.
+    pub empty: Vec<String>,
+    /// Cameras whose silhouette covers at least [`FULL_SHARE`] of the image.
+    pub full: Vec<String>,
+}
+
+/// The share of an image a silhouette covers from which it is taken as "everything" (a
+/// blank white or inverted mask): it carves nothing.
+pub const FULL_SHARE: f64 = 0.995;
+
+impl Coverage {
+    /// The coverage of `masks` (binary, one per camera of `cams`).
+    pub fn of(cams: &[crate::camera::Camera], masks: &[GrayImage]) -> Coverage {
+        let mut out = Coverage::default();
+        for (cam, m) in cams.iter().zip(masks) {
+            let on = m.as_raw().iter().filter(|&&v| v >= 128).count();
+            let all = m.as_raw().len().max(1);
+            if on == 0 {
+                out.empty.push(cam.name.clone());
+            } else if on as f64 >= FULL_SHARE * all as f64 {
+                out.full.push(cam.name.clone());
+            }
+        }
+        out
+    }
+
+    /// Why a hull carved from these silhouettes is empty, in the user's terms.
+    pub fn why_empty(&self) -> String {
+        if self.empty.is_empty() {
+            "every camera's silhouette holds the subject, but their cones do not meet: check the \
+             calibration against the masks (a camera's R or t, or two cameras swapped)"
+                .into()
+        } else {
+            format!(
+                "the silhouette of camera(s) {} is empty (no subject pixel: masks must be 255 or \
+                 1 on the subject, 0 elsewhere); every camera must see the subject, or allow \
+                 cameras to disagree with visual_hull.all_but",
+                self.empty.join(", ")
+            )
+        }
+    }
+}

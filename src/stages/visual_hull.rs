@@ -432,7 +432,9 @@ pub fn box_blur_3d(grid: &GridSpec, values: &[f32]) -> Vec<f32> {
 
 /// Checks the memory a grid needs against the cap.
 pub fn check_memory(grid: &GridSpec, p: &VisualHullParams) -> std::result::Result<(), String> {
-    let mb = grid.len() as f64 * BYTES_PER_VOXEL / 1e6;
+    // In floating point: the product of absurd dimensions overflows an integer.
+    let voxels: f64 = grid.dims.iter().map(|&d| d as f64).product();
+    let mb = voxels * BYTES_PER_VOXEL / 1e6;
     if mb > p.memory_cap_mb {
         return Err(format!(
             "the grid of {}x{}x{} voxels of {} m needs about {mb:.0} MB, over visual_hull.memory_cap_mb = {}; \
@@ -459,8 +461,74 @@ pub fn validate(p: &VisualHullParams) -> std::result::Result<(), String> {
             ));
         }
     }
-    if p.margin < 0.0 {
-        return Err("visual_hull.margin must not be negative".into());
+    if p.voxel_size > MAX_VOXEL_SIZE {
+        return Err(format!(
+            "visual_hull.voxel_size {} m is larger than {MAX_VOXEL_SIZE} m: a person 1.7 m tall \
+             would be a handful of voxels; use 0.005 to 0.02 for a body",
+            p.voxel_size
+        ));
+    }
+    if !(p.margin >= 0.0 && p.margin <= 10.0) {
+        return Err(format!(
+            "visual_hull.margin must be a length from 0 to 10 m, got {}",
+            p.margin
+        ));
+    }
+    if !(p.memory_cap_mb > 0.0 && p.memory_cap_mb.is_finite()) {
+        return Err(format!(
+            "visual_hull.memory_cap_mb must be a positive number of MB, got {}",
+            p.memory_cap_mb
+        ));
+    }
+    crate::limits::check_smoothing("visual_hull.smoothing_iterations", p.smoothing_iterations)?;
+    if let Some(b) = &p.bbox {
+        let grid = GridSpec::covering(Vector3::from(b.min), Vector3::from(b.max), p.voxel_size);
+        check_memory(&grid, p)?;
+        check_resolution(&grid)?;
+    }
+    Ok(())
+}
+
+/// The largest voxel accepted, metres.
+pub const MAX_VOXEL_SIZE: f64 = 0.25;
+
+/// The fewest voxels a grid must span along its longest side.
+pub const MIN_VOXELS_ACROSS: usize = 12;
+
+/// Refuses a grid too coarse to hold a shape (fewer than [`MIN_VOXELS_ACROSS`] voxels
+/// along its longest side).
+pub fn check_resolution(grid: &GridSpec) -> std::result::Result<(), String> {
+    let across = grid.dims.iter().copied().max().unwrap_or(0);
+    if across < MIN_VOXELS_ACROSS {
+        return Err(format!(
+            "the grid is {}x{}x{} voxels of {} m, fewer than {MIN_VOXELS_ACROSS} across: the hull \
+             would be a few blocks; use a smaller visual_hull.voxel_size",
+            grid.dims[0], grid.dims[1], grid.dims[2], grid.voxel
+        ));
+    }
+    Ok(())
+}
+
+/// Checks the parameters against the capture's cameras (`cameras` of them).
+pub fn validate_for_cameras(
+    p: &VisualHullParams,
+    cameras: usize,
+) -> std::result::Result<(), String> {
+    if p.min_views > cameras {
+        return Err(format!(
+            "visual_hull.min_views = {} is more than the capture's {cameras} cameras: every voxel \
+             would be carved; use 2 (the default) up to {cameras}",
+            p.min_views
+        ));
+    }
+    if p.all_but + 2 > cameras {
+        return Err(format!(
+            "visual_hull.all_but = {} lets all but {} of the capture's {cameras} cameras disagree; \
+             at least two cameras must agree: use 0 (the default) up to {}",
+            p.all_but,
+            cameras.saturating_sub(p.all_but),
+            cameras.saturating_sub(2)
+        ));
     }
     Ok(())
 }
@@ -553,6 +621,7 @@ pub fn reconstruct(
     }
     let grid = GridSpec::covering(lo, hi, p.voxel_size);
     check_memory(&grid, p)?;
+    check_resolution(&grid)?;
     let mut occupied = carve(&grid, cams, &counts, p);
     if !occupied.iter().any(|&o| o) {
         return Ok(None);
