@@ -146,7 +146,21 @@ impl Cache {
                 if m.key != key {
                     return ArtifactState::Stale;
                 }
-                if !m.files.iter().all(|f| dir.join(f).is_file()) {
+                // Absent files: missing. Present but not written by the pipeline (a link, a
+                // FIFO, a folder in a file's place): damaged.
+                let kinds: Vec<Option<std::fs::FileType>> = m
+                    .files
+                    .iter()
+                    .map(|f| {
+                        std::fs::symlink_metadata(dir.join(f))
+                            .ok()
+                            .map(|x| x.file_type())
+                    })
+                    .collect();
+                if kinds.iter().any(|k| k.is_some_and(|k| !k.is_file())) {
+                    return ArtifactState::Damaged;
+                }
+                if kinds.iter().any(|k| k.is_none()) {
                     return ArtifactState::Missing;
                 }
                 // Sizes first (cheap: a truncated file), then the contents.

@@ -93,6 +93,7 @@ fn slurm_scripts_hold_no_injected_command() {
         .arg(hint)
         .current_dir(outer.path())
         .env("PATH", path)
+        .stdout(std::process::Stdio::null())
         .status()
         .unwrap();
     assert!(status.success(), "the hint failed: {hint}");
@@ -571,6 +572,38 @@ fn minor_holes_are_closed() {
         "{err}"
     );
 
+    // Cache files replaced by a FIFO or a link: noted as damaged, recomputed.
+    let run = outer.path().join("cache");
+    copy_sample(&run);
+    let args = [
+        "run",
+        "pipeline.yaml",
+        "--frames",
+        "0..0",
+        "--until",
+        "silhouette",
+    ];
+    let (ok, _, err) = run_cli(&args, &run);
+    assert!(ok, "{err}");
+    let masks = run.join("cache/silhouette/000000");
+    std::fs::remove_file(masks.join("cam00.png")).unwrap();
+    assert!(std::process::Command::new("mkfifo")
+        .arg(masks.join("cam00.png"))
+        .status()
+        .unwrap()
+        .success());
+    std::fs::remove_file(masks.join("cam01.png")).unwrap();
+    std::os::unix::fs::symlink("cam02.png", masks.join("cam01.png")).unwrap();
+    let (ok, out, err) = run_cli(&args, &run);
+    assert!(ok, "{err}");
+    assert!(format!("{out}{err}").contains("damaged"), "{out}{err}");
+    assert!(std::fs::symlink_metadata(masks.join("cam00.png"))
+        .unwrap()
+        .is_file());
+    assert!(std::fs::symlink_metadata(masks.join("cam01.png"))
+        .unwrap()
+        .is_file());
+
     let run = outer.path().join("link");
     copy_sample(&run);
     std::fs::create_dir_all(run.join("output")).unwrap();
@@ -700,4 +733,44 @@ fn a_large_colmap_model_does_not_hang() {
         "took {:?}",
         started.elapsed()
     );
+}
+
+/// The pipeline.yaml of a four-camera synthetic capture runs: the box four silhouettes
+/// leave is as wide as the camera ring (over the memory cap), so synth writes the subject's
+/// own box, and the hull is carved within the cap.
+#[test]
+fn a_four_camera_synthetic_capture_runs_within_the_memory_cap() {
+    let outer = tempfile::tempdir().unwrap();
+    let args = [
+        "synth",
+        "--scene",
+        "humanoid",
+        "--out",
+        "s",
+        "--cameras",
+        "4",
+        "--width",
+        "96",
+        "--height",
+        "72",
+        "--frames",
+        "3",
+    ];
+    let (ok, _, err) = run_cli(&args, outer.path());
+    assert!(ok, "{err}");
+    let yaml = std::fs::read_to_string(outer.path().join("s/pipeline.yaml")).unwrap();
+    assert!(yaml.contains("bbox:"), "{yaml}");
+    let run = outer.path().join("s");
+    let (ok, _, err) = run_cli(
+        &[
+            "run",
+            "pipeline.yaml",
+            "--frames",
+            "0..0",
+            "--until",
+            "visual_hull",
+        ],
+        &run,
+    );
+    assert!(ok, "{err}");
 }

@@ -39,6 +39,53 @@ fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
     )
 }
 
+/// The `visual_hull:` section of a synthetic capture's pipeline.yaml: empty when the box
+/// the hull derives from the first frame's silhouettes fits the default memory cap, else
+/// an explicit box around the subject's true extent over every frame (`bounds`, with 10 cm
+/// to spare): with few cameras the derived box stays as wide as the camera ring.
+fn box_yaml(
+    cams: &[crate::camera::Camera],
+    seq_dir: &std::path::Path,
+    frame: u32,
+    bounds: (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>),
+) -> Result<String> {
+    use crate::stages::visual_hull::{self, MaskCounts, VisualHullParams};
+    let p = VisualHullParams::default();
+    let counts = cams
+        .iter()
+        .map(|c| {
+            let path = seq_dir
+                .join("masks")
+                .join(&c.name)
+                .join(format!("{}.png", crate::dataset::frame_stem(frame)));
+            let mask = crate::dataset::decode(&path, Some(c))?.into_luma8();
+            Ok(MaskCounts::new(&mask, c))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let fits = visual_hull::carving_box(cams, &counts, &p).is_none_or(|(lo, hi)| {
+        visual_hull::check_memory(
+            &crate::geometry::grid::GridSpec::covering(lo, hi, p.voxel_size),
+            &p,
+        )
+        .is_ok()
+    });
+    if fits {
+        return Ok(String::new());
+    }
+    let (lo, hi) = (bounds.0.add_scalar(-0.1), bounds.1.add_scalar(0.1));
+    let r = |v: f64| (v * 100.0).round() / 100.0;
+    Ok(format!(
+        "# the box the silhouettes of so few cameras leave is too large: the subject's own\n\
+         visual_hull:\n  bbox: {{min: [{}, {}, {}], max: [{}, {}, {}]}}\n",
+        r(lo.x),
+        r(lo.y),
+        r(lo.z),
+        r(hi.x),
+        r(hi.y),
+        r(hi.z)
+    ))
+}
+
 /// Which motion the humanoid performs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Motion {
@@ -319,11 +366,23 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     scene.body.skeleton.write(&seq_dir.join("skeleton.yaml"))?;
     crate::camera::write_cameras(&opts.out.join("calib").join("cameras.yaml"), &scene.cameras)?;
     let pipeline_yaml = opts.out.join("pipeline.yaml");
+    let bounds = posed
+        .iter()
+        .skip(first)
+        .flat_map(|(m, _, _)| &m.vertices)
+        .fold(
+            (
+                nalgebra::Vector3::repeat(f64::INFINITY),
+                nalgebra::Vector3::repeat(f64::NEG_INFINITY),
+            ),
+            |(lo, hi), v| (lo.inf(v), hi.sup(v)),
+        );
     crate::fsutil::write_atomic(
         &pipeline_yaml,
         format!(
-            "{}{}",
+            "{}{}{}",
             crate::config::default_yaml("calib/cameras.yaml", &format!("data/{}", scene.name)),
+            box_yaml(&scene.cameras, &seq_dir, first as u32, bounds)?,
             synth_export_yaml(nf, opts)
         )
         .as_bytes(),
