@@ -527,7 +527,8 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
             ));
         }
         cam.validate().map_err(&bad)?;
-        // A copied entry: the same pose twice adds nothing and hides a missing camera.
+        // A copied entry adds nothing and may hide a missing camera; a warning, not an
+        // error: real rings hold such pairs (the Middlebury temple ring's 1st and 11th).
         let pose: Vec<u64> = cam
             .r
             .iter()
@@ -536,11 +537,13 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
             .collect();
         if let Some(twin) = poses.insert(pose, cameras.len()) {
             let twin: &Camera = &cameras[twin];
-            return Err(bad(format!(
-                "has the same position and orientation as camera '{}' (a copied entry?); each \
-                 camera needs its own R and t",
+            warnings.push(format!(
+                "{}: camera '{}' has the same position and orientation as camera '{}' (a copied \
+                 entry?): it adds no view; if both are meant, check their R and t",
+                path.display(),
+                e.name.escape_debug(),
                 twin.name.escape_debug()
-            )));
+            ));
         }
         cameras.push(cam);
     }

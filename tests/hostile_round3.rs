@@ -419,7 +419,6 @@ fn garbage_calibrations_and_parameters_are_refused_by_check() {
         ("cx far out", Box::new(calib("[[287.5, 0.0, 127.78441168119092]", "[[287.5, 0.0, 5000]")), vec!["cam00", "principal point"]),
         ("t in millimetres", Box::new(calib("t: [-0.0, 0.9922778767136676, 3.9070941395600665]", "t: [-0.0, 992.2778767136676, 39070.941395600665]")), vec!["cam00", "metres"]),
         ("folding distortion", Box::new(calib("dist: [-0.046302777853818186, 0.019264660584736578, 0.00017274765380743222, 0.00014669071168012918, 0.0]", "dist: [-5, 0, 0, 0, 0]")), vec!["cam00", "folds"]),
-        ("duplicate pose", Box::new(duplicate), vec!["cam15", "cam00", "same position"]),
         ("voxel 5 m", Box::new(hull("voxel_size: 5")), vec!["voxel_size"]),
         ("min_views 1000", Box::new(hull("min_views: 1000")), vec!["min_views", "15 cameras"]),
         ("all_but 99", Box::new(hull("all_but: 99")), vec!["all_but"]),
@@ -437,6 +436,12 @@ fn garbage_calibrations_and_parameters_are_refused_by_check() {
         check_case(name, change, expected, false);
     }
     // Warnings, by camera, before the run.
+    check_case(
+        "duplicate pose",
+        &duplicate,
+        &["warning", "cam15", "cam00", "same position"],
+        true,
+    );
     check_case(
         "one white mask",
         &|run: &Path| rewrite_masks(run, &["cam03"], &|_| 255),

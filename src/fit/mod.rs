@@ -31,11 +31,12 @@ mod round;
 pub mod solve;
 pub mod tracking;
 
+pub use crate::skeleton::sides::{is_left, other_side};
 pub use descent::POINT_SHARE;
 pub use pairs::{thin, COMPATIBLE_SEARCH_LIMIT};
 pub use params::{validate, FitParams, HealthParams, Method, RestartParams, Start, StopParams};
 pub use probe::{Probe, RoundKind, RoundRecord, STEP_PART_PREFIX};
-pub use recovery::{is_left, other_side, unexplained_cm2};
+pub use recovery::unexplained_cm2;
 pub use result::{FitDiagnostics, FitResult, FitStatus, Observation, Unexplained};
 pub use tracking::{joint_motion, Neighbours, Tracker};
 

@@ -14,6 +14,7 @@
 
 use super::pairs::Prepared;
 use super::{FitDiagnostics, FitResult, FitStatus, Fitter, Probe};
+use crate::skeleton::sides::{is_left, is_left_token, other_side};
 use crate::skeleton::{Pose, Skeleton};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
@@ -145,51 +146,6 @@ struct MirroredLimb {
 /// The rotation `r` seen in a mirror: `M r M` (a rotation again, as M M = I).
 fn mirror(reflection: &Matrix3<f64>, r: &Rotation3<f64>) -> Rotation3<f64> {
     Rotation3::from_matrix_unchecked(reflection * r.matrix() * reflection)
-}
-
-/// The name of `name`'s other side, when its name carries one: `_l`/`_r`, `.L`/`.R`,
-/// `left`/`Left` and `right`/`Right` anywhere as a separate token.
-pub fn other_side(name: &str) -> Option<String> {
-    let tokens: Vec<&str> = name.split(['_', '.', '-', ' ']).collect();
-    let swapped: Vec<String> = tokens
-        .iter()
-        .map(|t| match *t {
-            "l" => "r".into(),
-            "r" => "l".into(),
-            "L" => "R".into(),
-            "R" => "L".into(),
-            "left" => "right".into(),
-            "right" => "left".into(),
-            "Left" => "Right".into(),
-            "Right" => "Left".into(),
-            t => t.to_string(),
-        })
-        .collect();
-    if swapped.iter().zip(&tokens).all(|(a, b)| a == b) {
-        return None;
-    }
-    // Rebuild with the original separators.
-    let mut out = String::with_capacity(name.len());
-    let mut rest = name;
-    for (token, new) in tokens.iter().zip(&swapped) {
-        out.push_str(new);
-        rest = &rest[token.len()..];
-        if let Some(sep) = rest.chars().next() {
-            out.push(sep);
-            rest = &rest[sep.len_utf8()..];
-        }
-    }
-    Some(out)
-}
-
-/// Whether `token` names the left side.
-fn is_left_token(token: &str) -> bool {
-    matches!(token, "l" | "L" | "left" | "Left")
-}
-
-/// Whether `name` is on the left side (its side token is `l`, `L`, `left` or `Left`).
-pub fn is_left(name: &str) -> bool {
-    name.split(['_', '.', '-', ' ']).any(is_left_token)
 }
 
 /// The skeleton's left/right limb pairs: a left bone whose other side exists and whose

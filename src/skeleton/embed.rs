@@ -297,11 +297,11 @@ pub fn embed(template: &Skeleton, surface: &TriMesh, up: Vector3<f64>) -> Result
 fn left_right_axis(template: &Skeleton, tpl: &Joints) -> Option<Vector2<f64>> {
     let mut sum = Vector2::zeros();
     for (l, bone) in template.bones.iter().enumerate() {
-        let Some(r) = crate::fit::other_side(&bone.name).and_then(|n| template.bone_index(&n))
+        let Some(r) = super::sides::other_side(&bone.name).and_then(|n| template.bone_index(&n))
         else {
             continue;
         };
-        if crate::fit::is_left(&bone.name) {
+        if super::sides::is_left(&bone.name) {
             sum += (tpl.bone(l).0 - tpl.bone(r).0).xy();
         }
     }
@@ -426,7 +426,7 @@ fn place(
 fn limbs(template: &Skeleton) -> Vec<Vec<usize>> {
     let children = template.children();
     let paired = |b: usize| {
-        crate::fit::other_side(&template.bones[b].name)
+        super::sides::other_side(&template.bones[b].name)
             .and_then(|n| template.bone_index(&n))
             .is_some()
     };
@@ -772,7 +772,8 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
     };
     for limb in &limbs {
         let name = &template.bones[limb[0]].name;
-        let Some(other) = crate::fit::other_side(name).and_then(|n| template.bone_index(&n)) else {
+        let Some(other) = super::sides::other_side(name).and_then(|n| template.bone_index(&n))
+        else {
             continue;
         };
         let Some(other_limb) = limbs.iter().find(|l| l[0] == other) else {

@@ -11,6 +11,7 @@ use std::path::Path;
 pub mod embed;
 pub mod model;
 pub mod pose;
+pub mod sides;
 pub mod skinning;
 mod tree;
 
