@@ -15,6 +15,16 @@ fn edit(path: &Path, from: &str, to: &str) {
     std::fs::write(path, text.replacen(from, to, 1)).unwrap();
 }
 
+/// The arguments that compute frame 0's silhouettes only.
+const SILHOUETTES_OF_FRAME_0: [&str; 6] = [
+    "run",
+    "pipeline.yaml",
+    "--frames",
+    "0..0",
+    "--until",
+    "silhouette",
+];
+
 /// `bash -n` on a script: its syntax is sound.
 fn bash_syntax_ok(script: &Path) -> bool {
     std::process::Command::new("bash")
@@ -464,14 +474,7 @@ fn mask_encodings_are_read_and_empty_silhouettes_are_named() {
     let outer = tempfile::tempdir().unwrap();
     let plain = outer.path().join("plain");
     copy_sample(&plain);
-    let args = [
-        "run",
-        "pipeline.yaml",
-        "--frames",
-        "0..0",
-        "--until",
-        "silhouette",
-    ];
+    let args = SILHOUETTES_OF_FRAME_0;
     let (ok, _, err) = run_cli(&args, &plain);
     assert!(ok, "{err}");
     let silhouette = |run: &Path, cam: &str| {
@@ -580,14 +583,7 @@ fn minor_holes_are_closed() {
     // Cache files replaced by a FIFO or a link: noted as damaged, recomputed.
     let run = outer.path().join("cache");
     copy_sample(&run);
-    let args = [
-        "run",
-        "pipeline.yaml",
-        "--frames",
-        "0..0",
-        "--until",
-        "silhouette",
-    ];
+    let args = SILHOUETTES_OF_FRAME_0;
     let (ok, _, err) = run_cli(&args, &run);
     assert!(ok, "{err}");
     let masks = run.join("cache/silhouette/000000");

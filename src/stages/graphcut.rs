@@ -72,7 +72,7 @@ pub struct GraphcutParams {
     /// kept outside the photo-consistent surface when the cost of the faces it adds differs
     /// from that of the faces it hides by less than lambda h / (4 pi / 3) (0.48 at 1 cm
     /// voxels), so the cut leans outward by up to a voxel where it carves; lower values
-    /// shrink surfaces nothing sees (see BENCHMARKS.md's tried table).
+    /// shrink surfaces nothing sees (see docs/decisions.md).
     pub ballooning: f64,
     /// Evidence-weighted ballooning: the photo-consistency C from which a surface seen behind
     /// a band voxel (deeper along the hull's inward normal, within the band, and at least as
