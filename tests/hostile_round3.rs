@@ -200,6 +200,12 @@ fn out_never_replaces_devices_fifos_or_the_project_files() {
     assert!(ok, "{err}");
 }
 
+/// The bundled sample, frames 0..4.
+fn sample_of_five_frames(dir: &Path) {
+    copy_sample(dir);
+    edit(&dir.join("pipeline.yaml"), "frames: all", "frames: 0..4");
+}
+
 /// The fit's outputs of a run folder.
 fn fit_outputs(run: &Path) -> Vec<(String, Vec<u8>)> {
     ["joints.csv", "fit.csv", "poses.csv"]
@@ -219,7 +225,7 @@ fn assert_same(a: &[(String, Vec<u8>)], b: &[(String, Vec<u8>)], what: &str) {
     }
 }
 
-/// A run stopped during the fit (here: by fitting the first frames only, then by SIGKILL,
+/// A run stopped during the fit (here: by fitting frames 0..1 only, then by SIGKILL,
 /// then by deleting one frame's fit files) and resumed writes what a fresh run writes, byte
 /// for byte. A changed frame rate (read by the fit) recomputes the fit and equals a fresh run
 /// at that rate.
@@ -227,20 +233,20 @@ fn assert_same(a: &[(String, Vec<u8>)], b: &[(String, Vec<u8>)], what: &str) {
 fn a_resumed_fit_equals_a_fresh_one_byte_for_byte() {
     let outer = tempfile::tempdir().unwrap();
     let fresh = outer.path().join("fresh");
-    copy_sample(&fresh);
+    sample_of_five_frames(&fresh);
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &fresh);
     assert!(ok, "{err}");
     let reference = fit_outputs(&fresh);
 
-    // Stopped after frame 2's fit, then resumed.
+    // Stopped after frame 1's fit, then resumed.
     let resumed = outer.path().join("resumed");
-    copy_sample(&resumed);
-    let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--frames", "0..2"], &resumed);
+    sample_of_five_frames(&resumed);
+    let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--frames", "0..1"], &resumed);
     assert!(ok, "{err}");
     let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], &resumed);
     assert!(ok, "{err}");
-    assert!(out.contains("fit: 4 computed, 3 reused"), "{out}");
-    assert_same(&reference, &fit_outputs(&resumed), "resumed after frame 2");
+    assert!(out.contains("fit: 3 computed, 2 reused"), "{out}");
+    assert_same(&reference, &fit_outputs(&resumed), "resumed after frame 1");
 
     // One frame's fit files deleted.
     for name in std::fs::read_dir(resumed.join("cache/fit")).unwrap() {
@@ -249,18 +255,18 @@ fn a_resumed_fit_equals_a_fresh_one_byte_for_byte() {
             .file_name()
             .unwrap()
             .to_string_lossy()
-            .starts_with("000004.")
+            .starts_with("000003.")
         {
             std::fs::remove_file(name).unwrap();
         }
     }
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &resumed);
     assert!(ok, "{err}");
-    assert_same(&reference, &fit_outputs(&resumed), "frame 4 deleted");
+    assert_same(&reference, &fit_outputs(&resumed), "frame 3 deleted");
 
     // Killed (SIGKILL) once the fit has begun, then resumed.
     let killed = outer.path().join("killed");
-    copy_sample(&killed);
+    sample_of_five_frames(&killed);
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--until", "model"], &killed);
     assert!(ok, "{err}");
     let mut child = std::process::Command::new(pipeline_bin())
@@ -299,9 +305,9 @@ fn a_resumed_fit_equals_a_fresh_one_byte_for_byte() {
     );
     let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], &resumed);
     assert!(ok, "{err}");
-    assert!(out.contains("fit: 7 computed, 0 reused"), "{out}");
+    assert!(out.contains("fit: 5 computed, 0 reused"), "{out}");
     let fresh25 = outer.path().join("fresh25");
-    copy_sample(&fresh25);
+    sample_of_five_frames(&fresh25);
     edit(
         &fresh25.join("pipeline.yaml"),
         "frame_rate: 8.33",
