@@ -44,6 +44,132 @@ pub struct Written {
     /// The frame the skeleton was embedded at.
     pub frame: u32,
     pub skeleton_value: Skeleton,
+    /// Every frame examined: its score, or why it was refused; best first.
+    pub candidates: Vec<Candidate>,
+}
+
+/// A frame `pipeline skeleton` examined.
+#[derive(Debug, Clone)]
+pub struct Candidate {
+    pub frame: u32,
+    /// The embedding's score ([`Scored::score`]), or why the frame was refused.
+    pub outcome: std::result::Result<f64, String>,
+}
+
+/// An embedding in one frame, scored.
+#[derive(Debug, Clone)]
+struct Scored {
+    skeleton: Skeleton,
+    /// The share of (joint, camera) pairs whose joint projects inside the camera's
+    /// silhouette (dilated by [`MASK_SLACK_PX`]), less the share of the surface the bones
+    /// leave unexplained: 1 for a skeleton every view agrees with.
+    score: f64,
+}
+
+/// One examined frame.
+struct Tried {
+    frame: u32,
+    outcome: std::result::Result<Scored, String>,
+}
+
+/// How many frames `pipeline skeleton` examines without `--frame`, at most.
+pub const CANDIDATE_FRAMES: usize = 12;
+
+/// Pixels of slack around a silhouette when testing a joint's projection.
+pub const MASK_SLACK_PX: i64 = 5;
+
+/// Frames spread evenly over `frames` (sorted), at most [`CANDIDATE_FRAMES`], the first and
+/// last among them.
+pub fn candidate_frames(frames: &[u32]) -> Vec<u32> {
+    let n = frames.len();
+    if n <= CANDIDATE_FRAMES {
+        return frames.to_vec();
+    }
+    let mut out: Vec<u32> = (0..CANDIDATE_FRAMES)
+        .map(|k| frames[k * (n - 1) / (CANDIDATE_FRAMES - 1)])
+        .collect();
+    out.dedup();
+    out
+}
+
+/// Reconstructs `frame` up to its refined surface and embeds `template` in its largest
+/// piece; a refusal is the outcome, not an error.
+fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Result<Tried> {
+    let opts = RunOptions {
+        only: None,
+        from: None,
+        until: Some("graphcut".into()),
+        frames: Some(FrameRange {
+            first: frame,
+            last: frame,
+        }),
+        force: false,
+    };
+    crate::runner::run(job, &opts)?;
+    let (ply, _) = crate::stages::hull_files(frame);
+    let surface = crate::geometry::ply::read_ply(&job.cache.stage_dir("graphcut").join(ply))?;
+    // Phantom pieces (floor blobs, cables) would distort the body's height and coverage.
+    let body = surface.largest_piece();
+    let outcome = match crate::skeleton::embed::embed_scored(template, &body, up) {
+        Ok(e) => {
+            let ctx = job.context();
+            let masks = crate::stages::load_silhouettes(&ctx, frame)?;
+            let agreement = silhouette_agreement(&job.sequence.cameras, &masks, &e.skeleton);
+            Ok(Scored {
+                skeleton: e.skeleton,
+                score: agreement - e.uncovered_share,
+            })
+        }
+        Err(m) => Err(m),
+    };
+    Ok(Tried { frame, outcome })
+}
+
+/// The share of (joint, camera) pairs whose joint (every bone's head and tail) projects
+/// inside the camera's silhouette, within [`MASK_SLACK_PX`] pixels.
+pub fn silhouette_agreement(
+    cams: &[crate::camera::Camera],
+    masks: &[image::GrayImage],
+    skeleton: &Skeleton,
+) -> f64 {
+    let points: Vec<Vector3<f64>> = skeleton
+        .bones
+        .iter()
+        .flat_map(|b| [b.head, b.tail])
+        .collect();
+    let mut inside = 0usize;
+    for (cam, mask) in cams.iter().zip(masks) {
+        for p in &points {
+            if joint_in_mask(cam, mask, p) {
+                inside += 1;
+            }
+        }
+    }
+    inside as f64 / (points.len() * cams.len()).max(1) as f64
+}
+
+/// Whether `p` projects within [`MASK_SLACK_PX`] of a silhouette pixel of `mask`.
+pub fn joint_in_mask(
+    cam: &crate::camera::Camera,
+    mask: &image::GrayImage,
+    p: &Vector3<f64>,
+) -> bool {
+    let Some(px) = cam.project(p) else {
+        return false;
+    };
+    let (w, h) = (mask.width() as i64, mask.height() as i64);
+    let (u, v) = (px.x.round() as i64, px.y.round() as i64);
+    let r = MASK_SLACK_PX;
+    for y in (v - r).max(0)..=(v + r).min(h - 1) {
+        for x in (u - r).max(0)..=(u + r).min(w - 1) {
+            if (x - u).pow(2) + (y - v).pow(2) <= r * r
+                && mask.get_pixel(x as u32, y as u32).0[0] >= 128
+            {
+                return true;
+            }
+        }
+    }
+    false
 }
 
 /// Reconstructs `frame` (default: the first of the job's frames) up to its refined
@@ -66,39 +192,55 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
                 .into(),
         )
     })?;
-    let frame = frame
-        .or_else(|| job.frames.first().copied())
-        .ok_or_else(|| Error::Usage("the sequence has no frames to embed a skeleton in".into()))?;
-    if !job.frames.contains(&frame) {
-        return Err(Error::Usage(format!(
-            "frame {frame} is not among the sequence's frames"
-        )));
-    }
     let template = template.load()?;
-    let opts = RunOptions {
-        only: None,
-        from: None,
-        until: Some("graphcut".into()),
-        frames: Some(FrameRange {
-            first: frame,
-            last: frame,
-        }),
-        force: false,
+    let up = crate::export::axes::up_vector(up);
+    let candidates = match frame {
+        Some(f) if !job.frames.contains(&f) => {
+            return Err(Error::Usage(format!(
+                "frame {f} is not among the sequence's frames"
+            )))
+        }
+        Some(f) => vec![f],
+        None => candidate_frames(&job.frames),
     };
-    crate::runner::run(job, &opts)?;
-    let (ply, _) = crate::stages::hull_files(frame);
-    let surface_path = job.cache.stage_dir("graphcut").join(ply);
-    let surface = crate::geometry::ply::read_ply(&surface_path)?;
+    if candidates.is_empty() {
+        return Err(Error::Usage(
+            "the sequence has no frames to embed a skeleton in".into(),
+        ));
+    }
     let started = std::time::Instant::now();
-    let mut skeleton =
-        crate::skeleton::embed::embed(&template, &surface, crate::export::axes::up_vector(up))
-            .map_err(|m| {
-                Error::Usage(format!(
-                    "pipeline skeleton: no skeleton embedded in frame {frame} ({}): {m}",
-                    surface_path.display()
-                ))
-            })?;
+    let mut tried = Vec::with_capacity(candidates.len());
+    for &f in &candidates {
+        tried.push(try_frame(job, &template, up, f)?);
+    }
     let embed_seconds = started.elapsed().as_secs_f64();
+    let best = tried
+        .iter()
+        .filter_map(|t| t.outcome.as_ref().ok().map(|e| (t.frame, e)))
+        .max_by(|a, b| a.1.score.total_cmp(&b.1.score));
+    let Some((frame, chosen)) = best else {
+        let reasons: Vec<String> = tried
+            .iter()
+            .map(|t| {
+                format!(
+                    "frame {}: {}",
+                    t.frame,
+                    t.outcome.as_ref().err().unwrap_or(&String::new())
+                )
+            })
+            .collect();
+        return Err(Error::Usage(format!(
+            "pipeline skeleton: no skeleton embedded in {} ({}):\n  {}",
+            if tried.len() == 1 {
+                "the frame"
+            } else {
+                "any examined frame"
+            },
+            job.cache.stage_dir("graphcut").display(),
+            reasons.join("\n  ")
+        )));
+    };
+    let mut skeleton = chosen.skeleton.clone();
     skeleton.reference_frame = frame;
     let out = job.config.output.join("skeleton");
     crate::fsutil::create_dir_all(&out)?;
@@ -107,6 +249,19 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
     let overlay = out.join("overlay.png");
     write_overlay(job, frame, &skeleton, &overlay)?;
     skeleton.write(&path)?;
+    let mut candidates: Vec<Candidate> = tried
+        .into_iter()
+        .map(|t| Candidate {
+            frame: t.frame,
+            outcome: t.outcome.map(|e| e.score),
+        })
+        .collect();
+    candidates.sort_by(|a, b| match (&a.outcome, &b.outcome) {
+        (Ok(x), Ok(y)) => y.total_cmp(x),
+        (Ok(_), Err(_)) => std::cmp::Ordering::Less,
+        (Err(_), Ok(_)) => std::cmp::Ordering::Greater,
+        _ => a.frame.cmp(&b.frame),
+    });
     Ok(Written {
         skeleton: path,
         bones_ply,
@@ -114,6 +269,7 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
         embed_seconds,
         frame,
         skeleton_value: skeleton,
+        candidates,
     })
 }
 
@@ -172,7 +328,15 @@ fn write_overlay(job: &Job, frame: u32, skeleton: &Skeleton, path: &Path) -> Res
     let mut tiles = Vec::new();
     let mut labels = Vec::new();
     for (c, cam) in job.sequence.cameras.iter().enumerate() {
-        let image = job.sequence.load_frame(c, frame)?;
+        // A masks-only capture has no photograph: the silhouette, dimmed, stands in.
+        let image = if job.sequence.has_frames {
+            job.sequence.load_frame(c, frame)?
+        } else {
+            image::RgbImage::from_fn(masks[c].width(), masks[c].height(), |x, y| {
+                let v = masks[c].get_pixel(x, y).0[0] / 3;
+                image::Rgb([v, v, v])
+            })
+        };
         tiles.push(crate::overlay::skeleton_on_frame(
             cam, &image, &masks[c], &joints,
         ));

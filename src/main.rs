@@ -207,8 +207,8 @@ enum Command {
         /// (its bones, names and proportions; its size and place do not matter).
         #[arg(long, default_value = "humanoid")]
         template: String,
-        /// The reference frame (default: the first frame of pipeline.yaml's range). Choose
-        /// one where the arms and legs stand clear of the body.
+        /// The reference frame. Default: up to 12 frames spread over pipeline.yaml's range are
+        /// examined (only they are reconstructed), and the best embedding is written.
         #[arg(long)]
         frame: Option<u32>,
         /// Replace an existing skeleton.yaml.
@@ -674,6 +674,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             job.sequence.skeleton_ignored = force;
             let template = hullpose::autoskeleton::Template::parse(&template);
             let w = hullpose::autoskeleton::make(&job, &template, frame, force)?;
+            if w.candidates.len() > 1 {
+                println!("frames examined (score: the share of joints every view's silhouette holds, less the surface left unexplained):");
+                for c in &w.candidates {
+                    match &c.outcome {
+                        Ok(score) => println!("  frame {:>5}: score {score:.3}", c.frame),
+                        Err(why) => println!("  frame {:>5}: refused: {why}", c.frame),
+                    }
+                }
+            }
             println!(
                 "embedded {} bones in frame {} in {:.2} s",
                 w.skeleton_value.bones.len(),

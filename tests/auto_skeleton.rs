@@ -75,9 +75,19 @@ fn tracking_from_the_automatic_skeleton_stays_within_two_and_a_half_centimetres(
         yaml.replace("frames: all", "frames: 0..8"),
     )
     .unwrap();
-    let (ok, _, err) = run_cli(&["skeleton", "pipeline.yaml"], d);
+    // Without --frame every frame of 0..8 is examined (at most 12 are) and scored; the
+    // best is written, wherever it lies: tracking then runs backwards and forwards from it.
+    let (ok, out, err) = run_cli(&["skeleton", "pipeline.yaml"], d);
     assert!(ok, "{err}");
+    assert!(out.contains("frames examined"), "{out}");
+    let examined = out
+        .lines()
+        .filter(|l| l.trim_start().starts_with("frame "))
+        .count();
+    assert_eq!(examined, 9, "{out}");
     let made = std::fs::read(d.join("data/humanoid/skeleton.yaml")).unwrap();
+    let chosen = Skeleton::read(&d.join("data/humanoid/skeleton.yaml")).unwrap();
+    eprintln!("reference frame chosen: {}", chosen.reference_frame);
 
     // A reference frame with the hands on the hips is refused, and leaves skeleton.yaml
     // as it was; an existing skeleton.yaml is replaced only with --force.

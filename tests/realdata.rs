@@ -37,7 +37,10 @@ fn check(set: &str, lo: [f64; 3], hi: [f64; 3], repaired: bool) {
     .unwrap();
     assert_eq!(seq.cameras.len(), 16);
     assert_eq!(seq.frames, vec![0]);
-    let repairs = seq.warnings.iter().filter(|w| w.contains("from a rotation"));
+    let repairs = seq
+        .warnings
+        .iter()
+        .filter(|w| w.contains("from a rotation"));
     assert_eq!(repairs.count() > 0, repaired, "{:?}", seq.warnings);
     // The temple ring's 1st and 11th images share one pose: named, not refused.
     let twins = seq

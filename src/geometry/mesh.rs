@@ -86,6 +86,61 @@ impl TriMesh {
 
     /// Whether every edge is shared by exactly two triangles with opposite directions
     /// (a closed, consistently oriented 2-manifold surface).
+    /// The connected piece enclosing the most volume (pieces joined by shared vertices),
+    /// its vertices renumbered; the mesh itself when it is one piece. Real silhouettes
+    /// leave small phantom pieces (floor blobs, a cable) beside the body.
+    pub fn largest_piece(&self) -> TriMesh {
+        let n = self.vertices.len();
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn root(parent: &mut [u32], mut i: u32) -> u32 {
+            while parent[i as usize] != i {
+                parent[i as usize] = parent[parent[i as usize] as usize];
+                i = parent[i as usize];
+            }
+            i
+        }
+        for t in &self.triangles {
+            for k in 1..3 {
+                let (a, b) = (root(&mut parent, t[0]), root(&mut parent, t[k]));
+                if a != b {
+                    parent[a.max(b) as usize] = a.min(b);
+                }
+            }
+        }
+        let mut volume: std::collections::HashMap<u32, f64> = Default::default();
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+            *volume.entry(root(&mut parent, t[0])).or_default() += a.dot(&b.cross(&c)) / 6.0;
+        }
+        if volume.len() <= 1 {
+            return self.clone();
+        }
+        let Some((&keep, _)) = volume
+            .iter()
+            .max_by(|x, y| x.1.abs().total_cmp(&y.1.abs()).then(y.0.cmp(x.0)))
+        else {
+            return self.clone();
+        };
+        let mut index = vec![u32::MAX; n];
+        let mut vertices = Vec::new();
+        for (i, v) in self.vertices.iter().enumerate() {
+            if root(&mut parent, i as u32) == keep {
+                index[i] = vertices.len() as u32;
+                vertices.push(*v);
+            }
+        }
+        let triangles = self
+            .triangles
+            .iter()
+            .filter(|t| index[t[0] as usize] != u32::MAX)
+            .map(|t| t.map(|i| index[i as usize]))
+            .collect();
+        TriMesh {
+            vertices,
+            triangles,
+        }
+    }
+
     pub fn is_watertight(&self) -> bool {
         use std::collections::HashMap;
         let mut directed: HashMap<(u32, u32), u32> = HashMap::new();

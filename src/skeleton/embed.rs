@@ -245,6 +245,24 @@ impl Joints {
 /// the result keeps the template's bones, names, parents and `reference_frame`. Refuses,
 /// with a message naming the problem, a surface it cannot embed the template in.
 pub fn embed(template: &Skeleton, surface: &TriMesh, up: Vector3<f64>) -> Result<Skeleton, String> {
+    embed_scored(template, surface, up).map(|e| e.skeleton)
+}
+
+/// An embedded skeleton and how much of the surface it leaves unexplained.
+#[derive(Debug, Clone)]
+pub struct Embedding {
+    pub skeleton: Skeleton,
+    /// The share of the surface farther than [`UNCOVERED_EXCESS`] beyond every bone's part
+    /// (below [`UNCOVERED_SHARE`], else the embedding is refused).
+    pub uncovered_share: f64,
+}
+
+/// [`embed`], with the embedding's coverage of the surface.
+pub fn embed_scored(
+    template: &Skeleton,
+    surface: &TriMesh,
+    up: Vector3<f64>,
+) -> Result<Embedding, String> {
     if template.bones.is_empty() {
         return Err("the template has no bones".into());
     }
@@ -272,9 +290,9 @@ pub fn embed(template: &Skeleton, surface: &TriMesh, up: Vector3<f64>) -> Result
     let (placed, scale) = place(&interior, template, &tpl, &weights)?;
     let refined = refine(&interior, template, &tpl, placed, scale, &weights);
     check(&interior, template, &refined)?;
-    check_coverage(&interior, template, &refined, &local)?;
+    let uncovered_share = check_coverage(&interior, template, &refined, &local)?;
     let from_z = to_z.inverse();
-    Ok(Skeleton {
+    let skeleton = Skeleton {
         reference_frame: template.reference_frame,
         bones: template
             .bones
@@ -289,6 +307,10 @@ pub fn embed(template: &Skeleton, surface: &TriMesh, up: Vector3<f64>) -> Result
                 }
             })
             .collect(),
+    };
+    Ok(Embedding {
+        skeleton,
+        uncovered_share,
     })
 }
 
@@ -681,7 +703,7 @@ fn check_coverage(
     template: &Skeleton,
     joints: &Joints,
     surface: &TriMesh,
-) -> Result<(), String> {
+) -> Result<f64, String> {
     let mut uncovered = vec![0usize; template.bones.len()];
     let mut total = 0usize;
     for v in surface.vertices.iter().step_by(7) {
@@ -715,7 +737,7 @@ fn check_coverage(
             template.bones[worst].name
         ));
     }
-    Ok(())
+    Ok(n as f64 / total.max(1) as f64)
 }
 
 /// Step 5: the refusals.
@@ -754,10 +776,13 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
         let tail = joints.points[joints.ends[b].1];
         if torso_depth > 0.0 && interior.at(&tail) > 0.6 * torso_depth {
             return Err(format!(
-                "the end of '{}' lies as deep inside the body as the torso: the limb seems \
-                 fused to the body at the reference frame; choose a reference frame where \
-                 the arms and legs stand clear of the torso (an A-pose or T-pose)",
-                template.bones[b].name
+                "the end of '{}' lies as deep inside the body as the torso ({:.0} against {:.0} \
+                 cm): the limb seems fused to the body at the reference frame; choose a \
+                 reference frame where the arms and legs stand clear of the torso (an A-pose \
+                 or T-pose)",
+                template.bones[b].name,
+                100.0 * interior.at(&tail),
+                100.0 * torso_depth
             ));
         }
     }
