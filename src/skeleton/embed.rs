@@ -288,9 +288,22 @@ pub fn embed_scored(
     let weights: Vec<f64> = lengths.iter().map(|l| l / total).collect();
 
     let (placed, scale) = place(&interior, template, &tpl, &weights)?;
-    let refined = refine(&interior, template, &tpl, placed, scale, &weights);
-    check(&interior, template, &refined)?;
-    let uncovered_share = check_coverage(&interior, template, &refined, &local)?;
+    let finish = |joints: Joints| -> Result<(Joints, f64), String> {
+        let refined = refine(&interior, template, &tpl, joints, scale, &weights);
+        check(&interior, template, &refined)?;
+        let uncovered = check_coverage(&interior, template, &refined, &local)?;
+        Ok((refined, uncovered))
+    };
+    // The template's own pose first; when that is refused (a real body's limbs raised,
+    // forward or bent), its limbs followed through the interior to its extremities.
+    let (refined, uncovered_share) = match finish(placed.clone()) {
+        Ok(done) => done,
+        Err(first) => {
+            let followed = follow_limbs(&interior, template, placed);
+            finish(followed)
+                .map_err(|second| format!("{second} (with the template's pose: {first})"))?
+        }
+    };
     let from_z = to_z.inverse();
     let skeleton = Skeleton {
         reference_frame: template.reference_frame,
@@ -520,6 +533,143 @@ fn swing_limbs(
         let turn = Rotation3::from_axis_angle(&axis, best.1);
         for &p in &moved {
             joints.points[p] = pivot + turn * (original.points[p] - pivot);
+        }
+    }
+    joints
+}
+
+/// The chains that end in a leaf bone (a hand, a foot, the head), each from the bone
+/// below its branching parent down to the leaf, in order.
+fn end_chains(template: &Skeleton) -> Vec<Vec<usize>> {
+    let children = template.children();
+    (0..template.bones.len())
+        .filter(|&b| children[b].is_empty())
+        .map(|leaf| {
+            let mut chain = vec![leaf];
+            while let Some(p) = template.bones[*chain.last().expect("a leaf")].parent {
+                if children[p].len() != 1 {
+                    break;
+                }
+                chain.push(p);
+            }
+            chain.reverse();
+            chain
+        })
+        .collect()
+}
+
+/// Step 3c ([`super::follow`]): each end chain laid along the interior's path to the
+/// extremity matched to it; chains with no extremity keep their pose.
+fn follow_limbs(interior: &Interior, template: &Skeleton, mut joints: Joints) -> Joints {
+    use super::follow;
+    let chains = end_chains(template);
+    let in_chain: Vec<usize> = chains.iter().flatten().copied().collect();
+    let torso: Vec<usize> = (0..template.bones.len())
+        .filter(|b| !in_chain.contains(b))
+        .collect();
+    if torso.is_empty() || chains.is_empty() {
+        return joints;
+    }
+    let near = torso
+        .iter()
+        .map(|&b| {
+            let (h, t) = joints.bone(b);
+            (h + t) / 2.0
+        })
+        .sum::<Vector3<f64>>()
+        / torso.len() as f64;
+    let field = follow::Field {
+        grid: &interior.grid,
+        depth: &interior.depth,
+    };
+    let tips = follow::extremities(&field, &near, 0.2);
+    if tips.is_empty() {
+        return joints;
+    }
+    // What each chain is: its root joint and its placed length.
+    let facts: Vec<(Vector3<f64>, f64)> = chains
+        .iter()
+        .map(|c| {
+            let root = joints.bone(c[0]).0;
+            let length = c
+                .iter()
+                .map(|&b| {
+                    let (h, t) = joints.bone(b);
+                    (t - h).norm()
+                })
+                .sum::<f64>();
+            (root, length)
+        })
+        .collect();
+    let cost = |c: usize, e: &follow::Extremity| -> f64 {
+        let (root, length) = facts[c];
+        let start = follow::nearest_on(&e.path, &root);
+        let available = follow::remaining(&e.path, start);
+        // The path must pass the chain's root (a hand's path runs through its shoulder)
+        // and offer about the chain's length beyond it; where the template's end lies says
+        // nothing (a real body's limbs are anywhere).
+        (available - length).abs() / length + 2.0 * (e.path[start] - root).norm() / length
+    };
+    // Brute force over the assignments (a chain may stay unmatched at cost 1).
+    const UNMATCHED: f64 = 1.0;
+    let mut best: (f64, Vec<Option<usize>>) = (f64::INFINITY, Vec::new());
+    let mut current = vec![None; chains.len()];
+    fn search(
+        c: usize,
+        used: &mut Vec<bool>,
+        current: &mut Vec<Option<usize>>,
+        total: f64,
+        best: &mut (f64, Vec<Option<usize>>),
+        costs: &[Vec<f64>],
+    ) {
+        if total >= best.0 {
+            return;
+        }
+        if c == costs.len() {
+            *best = (total, current.clone());
+            return;
+        }
+        current[c] = None;
+        search(c + 1, used, current, total + UNMATCHED, best, costs);
+        for e in 0..used.len() {
+            if !used[e] && costs[c][e] < UNMATCHED {
+                used[e] = true;
+                current[c] = Some(e);
+                search(c + 1, used, current, total + costs[c][e], best, costs);
+                used[e] = false;
+            }
+        }
+        current[c] = None;
+    }
+    let costs: Vec<Vec<f64>> = (0..chains.len())
+        .map(|c| tips.iter().map(|e| cost(c, e)).collect())
+        .collect();
+    search(
+        0,
+        &mut vec![false; tips.len()],
+        &mut current,
+        0.0,
+        &mut best,
+        &costs,
+    );
+    for (c, matched) in best.1.iter().enumerate() {
+        let Some(e) = matched else { continue };
+        let path = &tips[*e].path;
+        let (root, length) = facts[c];
+        let start = follow::nearest_on(path, &root);
+        let shrink = (follow::remaining(path, start) / length).min(1.0);
+        let lengths: Vec<f64> = chains[c]
+            .iter()
+            .map(|&b| {
+                let (h, t) = joints.bone(b);
+                (t - h).norm()
+            })
+            .collect();
+        let mut along = 0.0;
+        for (&b, l) in chains[c].iter().zip(lengths) {
+            along += l * shrink;
+            let tail = joints.ends[b].1;
+            joints.points[tail] = follow::along(path, start, along);
         }
     }
     joints

@@ -9,6 +9,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 pub mod embed;
+pub mod follow;
 pub mod model;
 pub mod pose;
 pub mod sides;

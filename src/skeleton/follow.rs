@@ -1,0 +1,222 @@
+//! Limbs followed through the body's interior, for bodies the template's own pose does not
+//! reach (a real dancer's raised, forward or bent arms, a leg bent back): the interior's
+//! extremities (hands, feet, head) are found as the farthest points of geodesic paths from
+//! the torso, each is matched to one of the template's limb ends, and that limb's joints
+//! are laid along the path at the template's bone lengths. Pinocchio (Baran and Popović
+//! 2007) embeds along the medial axis in the same spirit.
+//!
+//! 1. Geodesic distances over the inside voxels (26-neighbour Dijkstra) from the deepest
+//!    voxel near the placed torso.
+//! 2. Extremities: the farthest voxel not yet claimed, then the tube around its path (the
+//!    local depth plus [`TUBE_MARGIN`]) is claimed, and again, while the farthest
+//!    unclaimed voxel lies at least [`MIN_REACH`] from the torso.
+//! 3. Matching: each limb end (a limb's last bone's tail) and the head take the extremity
+//!    whose geodesic length and place best agree with the placed template's (brute force
+//!    over the assignments); an end with no extremity keeps its pose.
+//! 4. Each matched chain is laid along its path from the path point nearest its root joint,
+//!    the bones at their placed lengths, shortened together when the path is shorter.
+
+use nalgebra::Vector3;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// The interior as the follower sees it: a grid of depths (positive inside), metres.
+pub struct Field<'a> {
+    pub grid: &'a crate::geometry::grid::GridSpec,
+    pub depth: &'a [f32],
+}
+
+/// A path's voxels claimed around it: its local depth plus this, metres.
+const TUBE_MARGIN: f64 = 0.03;
+
+/// The least geodesic distance from the torso at which an extremity counts, metres.
+const MIN_REACH: f64 = 0.2;
+
+/// The geodesic ball claimed around a tip: this share of its distance from the torso, at
+/// least [`MIN_TIP_BALL`] metres (a hand or a foot, not its neighbour).
+const TIP_BALL_SHARE: f64 = 0.25;
+const MIN_TIP_BALL: f64 = 0.15;
+
+/// The most extremities looked for.
+const MOST_EXTREMITIES: usize = 20;
+
+/// An extremity and its path from the torso's seed.
+#[derive(Debug, Clone)]
+pub struct Extremity {
+    /// Voxel centres from the seed to the extremity.
+    pub path: Vec<Vector3<f64>>,
+    /// Geodesic length, metres.
+    pub length: f64,
+}
+
+impl Extremity {
+    pub fn tip(&self) -> Vector3<f64> {
+        *self.path.last().expect("a path has its seed")
+    }
+}
+
+/// The extremities of the interior, farthest first, from the deepest inside voxel within
+/// `radius` of `near`.
+pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extremity> {
+    let g = field.grid;
+    let inside = |i: usize| field.depth[i] > 0.0;
+    // The seed: the deepest voxel near the torso.
+    let mut seed = None;
+    let mut deepest = 0.0f32;
+    for i in 0..g.len() {
+        if inside(i) && field.depth[i] > deepest {
+            let [x, y, z] = g.coords(i);
+            if (g.centre(x, y, z) - near).norm() <= radius {
+                (seed, deepest) = (Some(i), field.depth[i]);
+            }
+        }
+    }
+    let Some(seed) = seed else {
+        return Vec::new();
+    };
+    // Dijkstra over the inside voxels, distances in metres.
+    let mut dist = vec![f64::INFINITY; g.len()];
+    let mut from = vec![usize::MAX; g.len()];
+    let mut heap = BinaryHeap::new();
+    dist[seed] = 0.0;
+    heap.push((Reverse(0u64), seed));
+    let [nx, ny, nz] = g.dims;
+    while let Some((Reverse(key), i)) = heap.pop() {
+        let d = key as f64 * 1e-9;
+        if d > dist[i] + 1e-12 {
+            continue;
+        }
+        let [x, y, z] = g.coords(i);
+        for dz in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    if dx == 0 && dy == 0 && dz == 0 {
+                        continue;
+                    }
+                    let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+                    if a < 0 || b < 0 || c < 0 || a >= nx as i64 || b >= ny as i64 || c >= nz as i64
+                    {
+                        continue;
+                    }
+                    let j = g.index(a as usize, b as usize, c as usize);
+                    if !inside(j) {
+                        continue;
+                    }
+                    let step = g.voxel * ((dx * dx + dy * dy + dz * dz) as f64).sqrt();
+                    let nd = d + step;
+                    if nd < dist[j] {
+                        dist[j] = nd;
+                        from[j] = i;
+                        heap.push((Reverse((nd * 1e9) as u64), j));
+                    }
+                }
+            }
+        }
+    }
+    let centre = |i: usize| {
+        let [x, y, z] = g.coords(i);
+        g.centre(x, y, z)
+    };
+    let mut claimed = vec![false; g.len()];
+    let mut out = Vec::new();
+    while out.len() < MOST_EXTREMITIES {
+        let far = (0..g.len())
+            .filter(|&i| dist[i].is_finite() && !claimed[i])
+            .max_by(|&a, &b| dist[a].total_cmp(&dist[b]));
+        let Some(far) = far else { break };
+        if dist[far] < MIN_REACH {
+            break;
+        }
+        let mut path = vec![far];
+        while let Some(&last) = path.last() {
+            if from[last] == usize::MAX {
+                break;
+            }
+            path.push(from[last]);
+        }
+        path.reverse();
+        // Claim the tube around the path.
+        for &p in &path {
+            let r = field.depth[p].max(0.0) as f64 + TUBE_MARGIN;
+            let k = (r / g.voxel).ceil() as i64;
+            let [x, y, z] = g.coords(p);
+            for c in (z as i64 - k).max(0)..=(z as i64 + k).min(nz as i64 - 1) {
+                for b in (y as i64 - k).max(0)..=(y as i64 + k).min(ny as i64 - 1) {
+                    for a in (x as i64 - k).max(0)..=(x as i64 + k).min(nx as i64 - 1) {
+                        let j = g.index(a as usize, b as usize, c as usize);
+                        if (centre(j) - centre(p)).norm() <= r {
+                            claimed[j] = true;
+                        }
+                    }
+                }
+            }
+        }
+        // And the geodesic ball around the tip: the rest of this hand or foot.
+        let reach = (TIP_BALL_SHARE * dist[far]).max(MIN_TIP_BALL);
+        let mut ball = vec![(far, 0.0f64)];
+        let mut seen = std::collections::HashMap::new();
+        seen.insert(far, 0.0f64);
+        while let Some((i, d)) = ball.pop() {
+            claimed[i] = true;
+            let [x, y, z] = g.coords(i);
+            for dz in -1i64..=1 {
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+                        if a < 0
+                            || b < 0
+                            || c < 0
+                            || a >= nx as i64
+                            || b >= ny as i64
+                            || c >= nz as i64
+                        {
+                            continue;
+                        }
+                        let j = g.index(a as usize, b as usize, c as usize);
+                        if !inside(j) {
+                            continue;
+                        }
+                        let nd = d + g.voxel * ((dx * dx + dy * dy + dz * dz) as f64).sqrt();
+                        if nd <= reach && seen.get(&j).is_none_or(|&old| nd < old) {
+                            seen.insert(j, nd);
+                            ball.push((j, nd));
+                        }
+                    }
+                }
+            }
+        }
+        out.push(Extremity {
+            path: path.iter().map(|&i| centre(i)).collect(),
+            length: dist[far],
+        });
+    }
+    out
+}
+
+/// The point `length` metres along `path` from its point `start` (clamped to its end).
+pub fn along(path: &[Vector3<f64>], start: usize, length: f64) -> Vector3<f64> {
+    let mut left = length;
+    for k in start..path.len().saturating_sub(1) {
+        let step = (path[k + 1] - path[k]).norm();
+        if step >= left {
+            return path[k] + (path[k + 1] - path[k]) * (left / step.max(1e-12));
+        }
+        left -= step;
+    }
+    *path.last().expect("a path has its seed")
+}
+
+/// The path's length from its point `start` to its end, metres.
+pub fn remaining(path: &[Vector3<f64>], start: usize) -> f64 {
+    path[start.min(path.len())..]
+        .windows(2)
+        .map(|w| (w[1] - w[0]).norm())
+        .sum()
+}
+
+/// The index of `path`'s point nearest `p`.
+pub fn nearest_on(path: &[Vector3<f64>], p: &Vector3<f64>) -> usize {
+    (0..path.len())
+        .min_by(|&a, &b| (path[a] - p).norm().total_cmp(&(path[b] - p).norm()))
+        .unwrap_or(0)
+}
