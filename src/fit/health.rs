@@ -147,13 +147,15 @@ pub const RECENT_FRAMES: usize = 5;
 /// Why a frame is implausible (empty when it is not): `fast_joint` when a joint moved
 /// faster than `p.max_joint_speed` at `frame_rate`, `iou_drop` when the worst IoU fell below
 /// `p.iou_drop` times the median of `recent` (the previous frames' worst IoU, oldest first;
-/// only its last [`RECENT_FRAMES`] count), `unexplained` when the fit left at least
+/// only its last [`RECENT_FRAMES`] count), `iou_drift` when it fell below `p.iou_drift` times
+/// `reference` (the reference frame's worst IoU; none at the reference frame), `unexplained` when the fit left at least
 /// `p.unexplained_cm2` of reliable observed surface unexplained, `interpenetration` when two
 /// parts overlap deeper than `p.interpenetration_cm`, `energy_jump` when eq. 4 rose more
 /// than `p.energy_jump` times the previous frame's.
 pub fn flags(
     h: &Health,
     recent: &[f64],
+    reference: Option<f64>,
     p: &super::params::HealthParams,
     frame_rate: f64,
 ) -> Vec<&'static str> {
@@ -164,6 +166,9 @@ pub fn flags(
     let last = &recent[recent.len().saturating_sub(RECENT_FRAMES)..];
     if !last.is_empty() && h.iou_worst < p.iou_drop * summarize(last, 0.0).iou_median {
         out.push("iou_drop");
+    }
+    if reference.is_some_and(|r| h.iou_worst < p.iou_drift * r) {
+        out.push("iou_drift");
     }
     if h.unexplained_cm2.is_some_and(|a| a >= p.unexplained_cm2) {
         out.push("unexplained");
@@ -230,24 +235,31 @@ mod tests {
         assert!((shifted[0] - 1.0 / 3.0).abs() < 0.05, "{shifted:?}");
         let p = crate::fit::params::HealthParams::default();
         let good = summarize(&[0.95, 0.96], 0.1);
-        assert!(flags(&good, &[0.96, 0.95, 0.97], &p, 25.0).is_empty());
+        assert!(flags(&good, &[0.96, 0.95, 0.97], Some(0.97), &p, 25.0).is_empty());
         let mut lost = summarize(&[0.7, 0.96], 0.3);
         lost.unexplained_cm2 = Some(12.0);
         lost.interpenetration = 0.08;
         lost.energy_ratio = 12.0;
         assert_eq!(
-            flags(&lost, &[0.96], &p, 25.0),
+            flags(&lost, &[0.96], Some(0.96), &p, 25.0),
             [
                 "fast_joint",
                 "iou_drop",
+                "iou_drift",
                 "unexplained",
                 "interpenetration",
                 "energy_jump"
             ]
         );
         assert_eq!(
-            flags(&lost, &[], &p, 10.0),
+            flags(&lost, &[], None, &p, 10.0),
             ["unexplained", "interpenetration", "energy_jump"]
+        );
+        // A slow drift: level with the recent frames, far below the reference.
+        let drifted = summarize(&[0.8, 0.9], 0.0);
+        assert_eq!(
+            flags(&drifted, &[0.81, 0.8, 0.8], Some(0.95), &p, 25.0),
+            ["iou_drift"]
         );
         let h = summarize(&[0.9, 0.5, 0.8, 0.95], 0.02);
         assert_eq!((h.iou_worst, h.iou_worst_camera), (0.5, 1));

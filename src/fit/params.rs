@@ -176,6 +176,10 @@ pub struct HealthParams {
     /// the recent level (the median of the previous five tracked frames' worst IoU).
     /// Default 0.9.
     pub iou_drop: f64,
+    /// A frame is flagged `iou_drift` when its worst-camera silhouette IoU falls below this
+    /// share of the reference frame's (a slow drift that `iou_drop`, judged against the
+    /// recent frames, never sees). Default 0.9.
+    pub iou_drift: f64,
     /// A frame is flagged, and fitted again from the recovery hypotheses (`recovery.rs`),
     /// when the fitted pose leaves more than this much reliable observed surface (rho_p at
     /// least 0.5) farther than 3 cm from the model, cm^2. Default 8 (a fit from the true
@@ -197,6 +201,7 @@ impl Default for HealthParams {
         HealthParams {
             max_joint_speed: 6.0,
             iou_drop: 0.9,
+            iou_drift: 0.9,
             unexplained_cm2: 8.0,
             interpenetration_cm: 6.0,
             energy_jump: 10.0,
@@ -291,6 +296,12 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         return Err(format!(
             "fit.motion_prior_acceleration must be a number of m/s^2, 0 or more (0: no motion prior), got {}",
             p.motion_prior_acceleration
+        ));
+    }
+    if !(h.iou_drift > 0.0 && h.iou_drift <= 1.0) {
+        return Err(format!(
+            "fit.health.iou_drift must be a share in (0, 1], got {}",
+            h.iou_drift
         ));
     }
     if !(positive(h.max_joint_speed) && h.iou_drop > 0.0 && h.iou_drop <= 1.0) {

@@ -28,7 +28,7 @@ pub const DIAGNOSTICS_HEADER: &str =
 /// median IoU over the cameras, the largest joint motion since the previous frame, the
 /// reliable observed surface the fit left unexplained (cm^2), the recovery (empty: not
 /// needed; `kept`: tried, the first fit kept; else the hypothesis that won), and the
-/// health checks that failed after it (`fast_joint`, `iou_drop`, `unexplained`, joined by
+/// health checks that failed after it (`fast_joint`, `iou_drop`, `iou_drift`, `unexplained`, joined by
 /// `+`; empty when none).
 pub const HEALTH_HEADER: &str =
     "iou_worst,iou_worst_camera,iou_median,joint_motion_m,unexplained_cm2,recovery,flags";
@@ -254,11 +254,21 @@ pub(super) fn compute(
             // Oldest first, as the health checks take them.
             let recent: Vec<f64> = previous.iter().rev().map(|s| s.iou_worst).collect();
             let previous_pose = previous.first().map(|s| s.pose.clone());
+            // The reference frame's level, for the drift check (none at t0 itself).
+            let reference_iou = if frame == t0 {
+                None
+            } else {
+                Some(match states.get(&t0) {
+                    Some(s) => s.iou_worst,
+                    None => cached_state(ctx, &model.skeleton, t0)?.iou_worst,
+                })
+            };
             let (out, state) = write_frame(
                 ctx,
                 &model,
                 &checks,
                 &recent,
+                reference_iou,
                 previous_pose.as_ref(),
                 previous_energy,
                 frame,
@@ -288,7 +298,7 @@ struct HealthChecks {
 
 /// Writes a frame's artifacts and returns them with the frame's state; `recent` holds the
 /// worst silhouette IoU of the previous tracked frames (oldest first; its health checks
-/// compare against them), `previous_pose` the previous tracked frame's pose (none at the
+/// compare against them), `reference_iou` the reference frame's (none at it), `previous_pose` the previous tracked frame's pose (none at the
 /// reference frame) and `previous_energy` the larger eq. 4 of the two previous tracked
 /// frames.
 #[allow(clippy::too_many_arguments)]
@@ -297,6 +307,7 @@ fn write_frame(
     model: &BodyModel,
     checks: &HealthChecks,
     recent: &[f64],
+    reference_iou: Option<f64>,
     previous_pose: Option<&Pose>,
     previous_energy: Option<f64>,
     frame: u32,
@@ -337,7 +348,13 @@ fn write_frame(
         .then(|| crate::fit::unexplained_cm2(&result.diagnostics, ctx.config.fit.sample_spacing));
     let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
     let p = &ctx.config.fit.health;
-    let flags = crate::fit::health::flags(&health, recent, p, ctx.config.export.frame_rate);
+    let flags = crate::fit::health::flags(
+        &health,
+        recent,
+        reference_iou,
+        p,
+        ctx.config.export.frame_rate,
+    );
     let diag = format!(
         "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{},{},{}\n",
         diagnostics_row(frame, &result.diagnostics),

@@ -212,7 +212,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::Tracked,
         about: "robust articulated fitting of the body model to every frame, tracked from t0",
         inputs: &["reliability", "model"],
-        format_version: 10,
+        format_version: 11,
         // The fit reads the frame rate (the motion prior's weight, the joint-speed check).
         params: |c| {
             format!(
