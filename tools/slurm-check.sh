@@ -59,6 +59,10 @@ state=$(job_state "$B")
 [ "$state" = "COMPLETED " ] || { cat "$SHARDED"/cache/slurm/*.out; die "final job $B ended $state"; }
 cmp "$LOCAL/output/joints.csv" "$SHARDED/output/joints.csv" || die "sharded joints.csv differs from the local run's"
 log "sharded joints.csv is identical to the local run's"
+# The scripts' #SBATCH --output values are double-quoted: sbatch must have taken them as
+# the paths they quote (a log per array task and one for the final job, in cache/slurm).
+logs=$(ls "$SHARDED"/cache/slurm/frames-*.out "$SHARDED"/cache/slurm/fit-*.out 2>/dev/null | wc -l)
+[ "$logs" -eq 4 ] || die "expected 4 job logs in $SHARDED/cache/slurm, found $logs"
 
 log "3. cancel array task 1 midway, then resubmit"
 CANCEL=$(make_copy cancel)
