@@ -46,6 +46,12 @@ pub struct Written {
     pub skeleton_value: Skeleton,
     /// Every frame examined: its score, or why it was refused; best first.
     pub candidates: Vec<Candidate>,
+    /// The joint (bone name, `head` or `tail`) the fewest cameras' silhouettes hold, and
+    /// how many of them do (within [`MASK_SLACK_PX`]).
+    pub least_seen_joint: (String, usize),
+    /// Each left limb's length against its right one's, metres: (left top bone, left,
+    /// right).
+    pub limb_lengths: Vec<(String, f64, f64)>,
 }
 
 /// A frame `pipeline skeleton` examined.
@@ -70,6 +76,36 @@ struct Scored {
 struct Tried {
     frame: u32,
     outcome: std::result::Result<Scored, String>,
+}
+
+/// Each left limb (a `_l` bone whose parent has no side, with the chain below it) against
+/// its right one: (left top bone, left length, right length), metres.
+pub fn limb_lengths(skeleton: &Skeleton) -> Vec<(String, f64, f64)> {
+    use crate::skeleton::sides::{is_left, other_side};
+    let children = skeleton.children();
+    let chain_length = |top: usize| {
+        let mut length = 0.0;
+        let mut at = Some(top);
+        while let Some(b) = at {
+            length += skeleton.bones[b].length();
+            at = children[b].first().copied();
+        }
+        length
+    };
+    skeleton
+        .bones
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| is_left(&b.name))
+        .filter(|(_, b)| {
+            b.parent
+                .is_none_or(|p| other_side(&skeleton.bones[p].name).is_none())
+        })
+        .filter_map(|(l, b)| {
+            let r = other_side(&b.name).and_then(|n| skeleton.bone_index(&n))?;
+            Some((b.name.clone(), chain_length(l), chain_length(r)))
+        })
+        .collect()
 }
 
 /// How many frames `pipeline skeleton` examines without `--frame`, at most.
@@ -262,7 +298,33 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
         (Err(_), Ok(_)) => std::cmp::Ordering::Greater,
         _ => a.frame.cmp(&b.frame),
     });
+    let ctx = job.context();
+    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
+    let least_seen_joint = skeleton
+        .bones
+        .iter()
+        .flat_map(|b| {
+            [
+                (format!("{} head", b.name), b.head),
+                (format!("{} tail", b.name), b.tail),
+            ]
+        })
+        .map(|(name, p)| {
+            let seen = job
+                .sequence
+                .cameras
+                .iter()
+                .zip(&masks)
+                .filter(|(cam, mask)| joint_in_mask(cam, mask, &p))
+                .count();
+            (name, seen)
+        })
+        .min_by_key(|x| x.1)
+        .unwrap_or_default();
+    let limb_lengths = limb_lengths(&skeleton);
     Ok(Written {
+        least_seen_joint,
+        limb_lengths,
         skeleton: path,
         bones_ply,
         overlay,

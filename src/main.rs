@@ -692,6 +692,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             for bone in &w.skeleton_value.bones {
                 println!("  {:<14} {:>6.1} cm", bone.name, 100.0 * bone.length());
             }
+            println!(
+                "every joint lies inside the silhouettes (within {} px) of at least {} of {} cameras (fewest: {})",
+                hullpose::autoskeleton::MASK_SLACK_PX,
+                w.least_seen_joint.1,
+                job.sequence.cameras.len(),
+                w.least_seen_joint.0
+            );
+            for (name, left, right) in &w.limb_lengths {
+                println!(
+                    "  limb from {name}: left {:.1} cm, right {:.1} cm ({:+.0}%)",
+                    100.0 * left,
+                    100.0 * right,
+                    100.0 * (left - right) / left.max(*right)
+                );
+            }
             println!("wrote {}", w.skeleton.display());
             println!(
                 "wrote {} (open it with the reference frame's mesh in MeshLab or Blender)",

@@ -51,6 +51,23 @@ fn three_bodies_at_twelve_and_eight_cameras_are_embedded_within_three_centimetre
             let (ok, out, err) = run_cli(&["skeleton", "pipeline.yaml"], d);
             assert!(ok, "body {body}, {cameras} cameras: {err}");
             assert!(out.contains("embedded 17 bones in frame 0"), "{out}");
+            // The command's own checks of the result: every joint inside all but at most
+            // one camera's silhouette, left and right limbs within 10%.
+            let seen: usize = out
+                .split("of at least ")
+                .nth(1)
+                .and_then(|t| t.split(' ').next())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("{out}"));
+            assert!(seen + 1 >= cameras, "{out}");
+            for line in out.lines().filter(|l| l.contains("limb from")) {
+                let pct: f64 = line
+                    .rsplit('(')
+                    .next()
+                    .and_then(|t| t.trim_end_matches("%)").parse().ok())
+                    .unwrap_or_else(|| panic!("{line}"));
+                assert!(pct.abs() <= 10.0, "{line}");
+            }
             let made = Skeleton::read(&d.join("data/humanoid/skeleton.yaml")).unwrap();
             let (mean, worst) = joint_errors(&made, &truth);
             eprintln!("body {body}, {cameras} cameras: mean {mean:.2} cm, worst {worst:.2} cm");
