@@ -107,7 +107,7 @@ pub struct FitParams {
 
 /// How well the surfaces place a point, metres: the motion prior's scale
 /// ([`FitParams::motion_prior_acceleration`]).
-const PRIOR_NOISE: f64 = 0.002;
+pub const PRIOR_NOISE: f64 = 0.002;
 
 /// The motion prior's weight per model vertex at `frame_rate` frames per second (0: none).
 pub fn motion_prior_weight(acceleration: f64, frame_rate: f64) -> f64 {

@@ -84,6 +84,31 @@ impl<'a> Tracker<'a> {
     }
 }
 
+/// The share of the last step's motion (RMS over the thinned model vertices) below which
+/// the motion prior's spread is never taken: a constant-velocity prediction can be off by
+/// about that much when the motion turns.
+const PRIOR_STEP_SHARE: f64 = 0.5;
+
+/// The motion prior's weight for this frame: `weight` (from the frame rate,
+/// [`super::params::motion_prior_weight`]) unless the motion itself shows the prediction
+/// to be less sure. Its spread, PRIOR_NOISE / sqrt(weight), is at least
+/// [`PRIOR_STEP_SHARE`] of the last step's RMS motion, so a frame rate set too high (a
+/// weight too large by f^4) cannot pin a fast-moving body to its prediction.
+fn prior_weight(weight: f64, last: &[Vector3<f64>], earlier: &[Vector3<f64>]) -> f64 {
+    if weight <= 0.0 || last.is_empty() {
+        return weight;
+    }
+    let step = (last
+        .iter()
+        .zip(earlier)
+        .map(|(a, b)| (a - b).norm_squared())
+        .sum::<f64>()
+        / last.len() as f64)
+        .sqrt();
+    let spread = (super::params::PRIOR_NOISE / weight.sqrt()).max(PRIOR_STEP_SHARE * step);
+    (super::params::PRIOR_NOISE / spread).powi(2)
+}
+
 impl Fitter<'_> {
     /// Fits a tracked frame from the start `params.start` chooses (`previous` is the
     /// neighbour's pose, nearer t0; `before` the pose one frame further back), and when that
@@ -113,7 +138,7 @@ impl Fitter<'_> {
                 .zip(&earlier)
                 .map(|(a, b)| 2.0 * a - b)
                 .collect();
-            prepared.prior = Some((targets, self.motion_prior));
+            prepared.prior = Some((targets, prior_weight(self.motion_prior, &last, &earlier)));
         }
         let (first, second) = match (&predicted, p.start) {
             (Some(pred), Start::Predicted) => (pred.clone(), Some(previous.clone())),
