@@ -2,7 +2,6 @@
 //! reconstruction, by embedding a template ([`crate::skeleton::embed`]); with a PLY of the
 //! bones and the skeleton drawn on the reference frame in every camera, to check it.
 
-use crate::config::FrameRange;
 use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
 use crate::runner::{Job, RunOptions};
@@ -131,17 +130,12 @@ pub fn candidate_frames(frames: &[u32]) -> Vec<u32> {
 /// Reconstructs `frame` up to its refined surface and embeds `template` in its largest
 /// piece; a refusal is the outcome, not an error.
 fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Result<Tried> {
+    // Only this frame is reconstructed (a job's runs compute the job's frames).
     let opts = RunOptions {
-        only: None,
-        from: None,
         until: Some("graphcut".into()),
-        frames: Some(FrameRange {
-            first: frame,
-            last: frame,
-        }),
-        force: false,
+        ..Default::default()
     };
-    crate::runner::run(job, &opts)?;
+    crate::runner::run(&job.with_frames(vec![frame]), &opts)?;
     let (ply, _) = crate::stages::hull_files(frame);
     let surface = crate::geometry::ply::read_ply(&job.cache.stage_dir("graphcut").join(ply))?;
     // Phantom pieces (floor blobs, cables) would distort the body's height and coverage.

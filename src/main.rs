@@ -343,7 +343,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 only,
                 from,
                 until,
-                frames,
                 force,
             };
             let reports = hullpose::runner::run(&job, &opts)?;
@@ -456,7 +455,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Ablation { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
-            ablation(&job, frames)?;
+            ablation(&job)?;
         }
         Command::Evaluate { file, frames } => {
             let job = Job::load(Config::load(&file)?, frames)?;
@@ -809,12 +808,11 @@ fn evaluate_pose(job: &Job) -> anyhow::Result<()> {
 }
 
 /// `pipeline ablation`: every method over the cached reconstruction.
-fn ablation(job: &Job, frames: Option<FrameRange>) -> anyhow::Result<()> {
+fn ablation(job: &Job) -> anyhow::Result<()> {
     use hullpose::fit::Method;
     let start = std::time::Instant::now();
     let opts = RunOptions {
         until: Some("model".into()),
-        frames,
         ..Default::default()
     };
     let reports = hullpose::runner::run(job, &opts)?;

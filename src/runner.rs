@@ -19,8 +19,6 @@ pub struct RunOptions {
     pub only: Option<String>,
     /// Re-run this stage and everything downstream.
     pub from: Option<String>,
-    /// Frames to process (overrides pipeline.yaml).
-    pub frames: Option<FrameRange>,
     /// Stop after this stage (stages after it are not run).
     pub until: Option<String>,
     /// Recompute even what the cache holds.
@@ -59,6 +57,17 @@ pub struct Job {
 }
 
 impl Job {
+    /// This job over `frames` only (the same capture, configuration and cache): the
+    /// frames a run computes are the job's.
+    pub fn with_frames(&self, frames: Vec<u32>) -> Job {
+        Job {
+            config: self.config.clone(),
+            sequence: self.sequence.clone(),
+            frames,
+            cache: self.cache.clone(),
+        }
+    }
+
     /// Loads pipeline.yaml's capture and selects frames (`frames` overrides the file's).
     pub fn load(config: Config, frames: Option<FrameRange>) -> Result<Job> {
         let sequence = Sequence::open_with_calibration(&config.calibration, &config.sequence)?;

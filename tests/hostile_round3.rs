@@ -546,6 +546,27 @@ fn skeleton_force_does_not_read_the_file_it_replaces() {
     }
 }
 
+/// `pipeline skeleton --frame F` reconstructs frame F only, even when skeleton.yaml names
+/// another reference frame (it used to compute every frame from there to F).
+#[test]
+fn skeleton_reconstructs_only_the_frame_it_examines() {
+    let outer = tempfile::tempdir().unwrap();
+    let run = outer.path().join("run");
+    copy_sample(&run);
+    let _ = run_cli(
+        &["skeleton", "pipeline.yaml", "--frame", "5", "--force"],
+        &run,
+    );
+    let mut hulls: Vec<String> = std::fs::read_dir(run.join("cache/visual_hull"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy()[..6].to_string())
+        .collect();
+    hulls.sort();
+    hulls.dedup();
+    assert_eq!(hulls, ["000005"]);
+}
+
 /// Minor holes: blank and invisible camera names, a model mesh or a plate that is a device,
 /// a link inside output/ into the capture, OpenCV entries of no known shape or element
 /// type, bench sizes that would exhaust memory.
