@@ -55,6 +55,25 @@ impl Extremity {
     }
 }
 
+/// The inside voxels among the 26 around voxel `i`, with the step to each, metres.
+fn inside_neighbours<'a>(field: &'a Field, i: usize) -> impl Iterator<Item = (usize, f64)> + 'a {
+    let g = field.grid;
+    let [x, y, z] = g.coords(i);
+    let [nx, ny, nz] = g.dims.map(|d| d as i64);
+    (-1i64..=1)
+        .flat_map(|dz| (-1i64..=1).flat_map(move |dy| (-1i64..=1).map(move |dx| (dx, dy, dz))))
+        .filter(|&d| d != (0, 0, 0))
+        .filter_map(move |(dx, dy, dz)| {
+            let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+            if a < 0 || b < 0 || c < 0 || a >= nx || b >= ny || c >= nz {
+                return None;
+            }
+            let j = g.index(a as usize, b as usize, c as usize);
+            (field.depth[j] > 0.0)
+                .then(|| (j, g.voxel * ((dx * dx + dy * dy + dz * dz) as f64).sqrt()))
+        })
+}
+
 /// The extremities of the interior, farthest first, from the deepest inside voxel within
 /// `radius` of `near`.
 pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extremity> {
@@ -86,30 +105,12 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
         if d > dist[i] + 1e-12 {
             continue;
         }
-        let [x, y, z] = g.coords(i);
-        for dz in -1i64..=1 {
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    if dx == 0 && dy == 0 && dz == 0 {
-                        continue;
-                    }
-                    let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
-                    if a < 0 || b < 0 || c < 0 || a >= nx as i64 || b >= ny as i64 || c >= nz as i64
-                    {
-                        continue;
-                    }
-                    let j = g.index(a as usize, b as usize, c as usize);
-                    if !inside(j) {
-                        continue;
-                    }
-                    let step = g.voxel * ((dx * dx + dy * dy + dz * dz) as f64).sqrt();
-                    let nd = d + step;
-                    if nd < dist[j] {
-                        dist[j] = nd;
-                        from[j] = i;
-                        heap.push((Reverse((nd * 1e9) as u64), j));
-                    }
-                }
+        for (j, step) in inside_neighbours(field, i) {
+            let nd = d + step;
+            if nd < dist[j] {
+                dist[j] = nd;
+                from[j] = i;
+                heap.push((Reverse((nd * 1e9) as u64), j));
             }
         }
     }
@@ -158,30 +159,11 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
         seen.insert(far, 0.0f64);
         while let Some((i, d)) = ball.pop() {
             claimed[i] = true;
-            let [x, y, z] = g.coords(i);
-            for dz in -1i64..=1 {
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let (a, b, c) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
-                        if a < 0
-                            || b < 0
-                            || c < 0
-                            || a >= nx as i64
-                            || b >= ny as i64
-                            || c >= nz as i64
-                        {
-                            continue;
-                        }
-                        let j = g.index(a as usize, b as usize, c as usize);
-                        if !inside(j) {
-                            continue;
-                        }
-                        let nd = d + g.voxel * ((dx * dx + dy * dy + dz * dz) as f64).sqrt();
-                        if nd <= reach && seen.get(&j).is_none_or(|&old| nd < old) {
-                            seen.insert(j, nd);
-                            ball.push((j, nd));
-                        }
-                    }
+            for (j, step) in inside_neighbours(field, i) {
+                let nd = d + step;
+                if nd <= reach && seen.get(&j).is_none_or(|&old| nd < old) {
+                    seen.insert(j, nd);
+                    ball.push((j, nd));
                 }
             }
         }
