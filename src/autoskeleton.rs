@@ -69,6 +69,8 @@ struct Scored {
     /// silhouette (dilated by [`MASK_SLACK_PX`]), less the share of the surface the bones
     /// leave unexplained: 1 for a skeleton every view agrees with.
     score: f64,
+    /// The joint the fewest silhouettes hold, and how many do ([`Written::least_seen_joint`]).
+    least_seen_joint: (String, usize),
 }
 
 /// One examined frame.
@@ -142,12 +144,14 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
     let body = surface.largest_piece();
     let outcome = match crate::skeleton::embed::embed_scored(template, &body, up) {
         Ok(e) => {
-            let ctx = job.context();
-            let masks = crate::stages::load_silhouettes(&ctx, frame)?;
-            let agreement = silhouette_agreement(&job.sequence.cameras, &masks, &e.skeleton);
+            let masks = crate::stages::load_silhouettes(&job.context(), frame)?;
+            let views = joint_views(&job.sequence.cameras, &masks, &e.skeleton);
+            let seen: usize = views.iter().map(|v| v.1).sum();
+            let agreement = seen as f64 / (views.len() * masks.len()).max(1) as f64;
             Ok(Scored {
                 skeleton: e.skeleton,
                 score: agreement - e.uncovered_share,
+                least_seen_joint: views.into_iter().min_by_key(|v| v.1).unwrap_or_default(),
             })
         }
         Err(m) => Err(m),
@@ -155,27 +159,31 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
     Ok(Tried { frame, outcome })
 }
 
-/// The share of (joint, camera) pairs whose joint (every bone's head and tail) projects
-/// inside the camera's silhouette, within [`MASK_SLACK_PX`] pixels.
-pub fn silhouette_agreement(
+/// Every joint of `skeleton` (each bone's `head` and `tail`, named) and how many of the
+/// cameras' silhouettes hold it, within [`MASK_SLACK_PX`] pixels.
+pub fn joint_views(
     cams: &[crate::camera::Camera],
     masks: &[image::GrayImage],
     skeleton: &Skeleton,
-) -> f64 {
-    let points: Vec<Vector3<f64>> = skeleton
+) -> Vec<(String, usize)> {
+    skeleton
         .bones
         .iter()
-        .flat_map(|b| [b.head, b.tail])
-        .collect();
-    let mut inside = 0usize;
-    for (cam, mask) in cams.iter().zip(masks) {
-        for p in &points {
-            if joint_in_mask(cam, mask, p) {
-                inside += 1;
-            }
-        }
-    }
-    inside as f64 / (points.len() * cams.len()).max(1) as f64
+        .flat_map(|b| {
+            [
+                (format!("{} head", b.name), b.head),
+                (format!("{} tail", b.name), b.tail),
+            ]
+        })
+        .map(|(name, p)| {
+            let seen = cams
+                .iter()
+                .zip(masks)
+                .filter(|(cam, mask)| joint_in_mask(cam, mask, &p))
+                .count();
+            (name, seen)
+        })
+        .collect()
 }
 
 /// Whether `p` projects within [`MASK_SLACK_PX`] of a silhouette pixel of `mask`.
@@ -271,6 +279,7 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
         )));
     };
     let mut skeleton = chosen.skeleton.clone();
+    let least_seen_joint = chosen.least_seen_joint.clone();
     skeleton.reference_frame = frame;
     let out = job.config.output.join("skeleton");
     crate::fsutil::create_dir_all(&out)?;
@@ -292,29 +301,6 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
         (Err(_), Ok(_)) => std::cmp::Ordering::Greater,
         _ => a.frame.cmp(&b.frame),
     });
-    let ctx = job.context();
-    let masks = crate::stages::load_silhouettes(&ctx, frame)?;
-    let least_seen_joint = skeleton
-        .bones
-        .iter()
-        .flat_map(|b| {
-            [
-                (format!("{} head", b.name), b.head),
-                (format!("{} tail", b.name), b.tail),
-            ]
-        })
-        .map(|(name, p)| {
-            let seen = job
-                .sequence
-                .cameras
-                .iter()
-                .zip(&masks)
-                .filter(|(cam, mask)| joint_in_mask(cam, mask, &p))
-                .count();
-            (name, seen)
-        })
-        .min_by_key(|x| x.1)
-        .unwrap_or_default();
     let limb_lengths = limb_lengths(&skeleton);
     Ok(Written {
         least_seen_joint,

@@ -629,9 +629,10 @@ pub fn check_cameras_look_at_the_scene(cams: &[Camera]) -> std::result::Result<(
                 c.name
             ));
         }
+        // Without the lens distortion: the point may lie far outside the image.
         let (w, h) = (c.width as f64, c.height as f64);
-        let u = c.fx * x.x / x.z + c.skew * x.y / x.z + c.cx;
-        let v = c.fy * x.y / x.z + c.cy;
+        let px = c.k_matrix() * (x / x.z);
+        let (u, v) = (px.x, px.y);
         if !(-w..=2.0 * w).contains(&u) || !(-h..=2.0 * h).contains(&v) {
             return Err(format!(
                 "camera '{}' does not see the point the cameras look at, {shown} (it would be at \

@@ -159,18 +159,11 @@ impl Job {
             }
         }
         let cov = crate::stages::silhouette::Coverage::of(&seq.cameras, &masks);
-        let mut out = Vec::new();
-        if !cov.full.is_empty() {
-            let message = format!(
-                "masks of frame {frame}: camera(s) {} cover the whole image, so they carve \
-                 nothing (inverted, or all white? the subject is 255, the background 0)",
-                cov.full.join(", ")
-            );
-            if cov.full.len() + self.config.visual_hull.all_but >= seq.cameras.len() {
-                return Err(Error::invalid(seq.dir.join("masks"), message));
-            }
-            out.push(message);
-        }
+        let full = cov.full_problem(frame, self.config.visual_hull.all_but, seq.cameras.len());
+        let mut out: Vec<String> = full
+            .map_err(|m| Error::invalid(seq.dir.join("masks"), m))?
+            .into_iter()
+            .collect();
         if !cov.empty.is_empty() {
             out.push(format!(
                 "masks of frame {frame}: camera(s) {} hold no subject pixel, so that frame's hull \

@@ -8,11 +8,11 @@
 //! 1. Geodesic distances over the inside voxels (26-neighbour Dijkstra) from the deepest
 //!    voxel near the placed torso.
 //! 2. Extremities: the farthest voxel not yet claimed, then the tube around its path (the
-//!    local depth plus [`TUBE_MARGIN`]) is claimed, and again, while the farthest
-//!    unclaimed voxel lies at least [`MIN_REACH`] from the torso.
-//! 3. Matching: each limb end (a limb's last bone's tail) and the head take the extremity
-//!    whose geodesic length and place best agree with the placed template's (brute force
-//!    over the assignments); an end with no extremity keeps its pose.
+//!    local depth plus [`TUBE_MARGIN`]) and the geodesic ball around it are claimed, and
+//!    again, while the farthest unclaimed voxel lies at least [`MIN_REACH`] from the torso.
+//! 3. Matching (`embed.rs`): each end chain (down to a hand, a foot, the head) takes the
+//!    extremity whose path passes nearest its root joint and offers about its length beyond
+//!    it (brute force over the assignments); a chain with no extremity keeps its pose.
 //! 4. Each matched chain is laid along its path from the path point nearest its root joint,
 //!    the bones at their placed lengths, shortened together when the path is shorter.
 
@@ -40,19 +40,11 @@ const MIN_TIP_BALL: f64 = 0.15;
 /// The most extremities looked for.
 const MOST_EXTREMITIES: usize = 20;
 
-/// An extremity and its path from the torso's seed.
+/// An extremity, as its path from the torso's seed.
 #[derive(Debug, Clone)]
 pub struct Extremity {
     /// Voxel centres from the seed to the extremity.
     pub path: Vec<Vector3<f64>>,
-    /// Geodesic length, metres.
-    pub length: f64,
-}
-
-impl Extremity {
-    pub fn tip(&self) -> Vector3<f64> {
-        *self.path.last().expect("a path has its seed")
-    }
 }
 
 /// The inside voxels among the 26 around voxel `i`, with the step to each, metres.
@@ -169,7 +161,6 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
         }
         out.push(Extremity {
             path: path.iter().map(|&i| centre(i)).collect(),
-            length: dist[far],
         });
     }
     out

@@ -275,10 +275,10 @@ pub(super) fn compute(
                 result,
             )?;
             states.insert(frame, state);
-            // Only the last few frames are read again (others come from the cache).
+            // Only the last few frames and t0 are read again (others come from the cache).
             if states.len() > 4 * crate::fit::health::RECENT_FRAMES {
                 states.retain(|&f, _| {
-                    f.abs_diff(frame) <= crate::fit::health::RECENT_FRAMES as u32 + 1
+                    f == t0 || f.abs_diff(frame) <= crate::fit::health::RECENT_FRAMES as u32 + 1
                 });
             }
             commit(frame, out, secs)
@@ -298,9 +298,9 @@ struct HealthChecks {
 
 /// Writes a frame's artifacts and returns them with the frame's state; `recent` holds the
 /// worst silhouette IoU of the previous tracked frames (oldest first; its health checks
-/// compare against them), `reference_iou` the reference frame's (none at it), `previous_pose` the previous tracked frame's pose (none at the
-/// reference frame) and `previous_energy` the larger eq. 4 of the two previous tracked
-/// frames.
+/// compare against them), `reference_iou` the reference frame's, `previous_pose` the
+/// previous tracked frame's pose (both none at the reference frame) and `previous_energy`
+/// the larger eq. 4 of the two previous tracked frames.
 #[allow(clippy::too_many_arguments)]
 fn write_frame(
     ctx: &Context,

@@ -369,20 +369,8 @@ fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let p = &ctx.config.visual_hull;
     let mut warnings = Vec::new();
     let coverage = silhouette::Coverage::of(&ctx.sequence.cameras, &masks);
-    if !coverage.full.is_empty() {
-        let message = format!(
-            "frame {frame}: the silhouette of camera(s) {} covers the whole image, so it carves \
-             nothing (masks inverted, or all white? the subject is 255, the background 0)",
-            coverage.full.join(", ")
-        );
-        if coverage.full.len() + p.all_but >= ctx.sequence.cameras.len() {
-            return Err(Error::invalid(
-                &ctx.sequence.dir,
-                format!("{message}; with every camera so the hull would fill the whole box"),
-            ));
-        }
-        warnings.push(message);
-    }
+    let full = coverage.full_problem(frame, p.all_but, ctx.sequence.cameras.len());
+    warnings.extend(full.map_err(|m| Error::invalid(&ctx.sequence.dir, m))?);
     let hull = visual_hull::reconstruct(&ctx.sequence.cameras, &masks, p).map_err(|m| {
         Error::invalid(&ctx.config.path, format!("visual_hull, frame {frame}: {m}"))
     })?;
@@ -443,7 +431,6 @@ fn write_reconstruction(
     })
 }
 
-/// Loads the silhouettes of a frame from the cache (for downstream stages and tests).
 /// Why `frame`'s hull is empty, from its silhouettes (for the model's and the skeleton's
 /// errors, which meet the empty surface later).
 pub fn why_hull_is_empty(ctx: &Context, frame: u32) -> String {
@@ -453,6 +440,7 @@ pub fn why_hull_is_empty(ctx: &Context, frame: u32) -> String {
     }
 }
 
+/// Loads the silhouettes of a frame from the cache (for downstream stages and tests).
 pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImage>> {
     let dir = ctx.cache.stage_dir("silhouette");
     ctx.sequence

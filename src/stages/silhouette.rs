@@ -351,6 +351,29 @@ impl Coverage {
         out
     }
 
+    /// The cameras whose silhouette of `frame` covers the whole image: `Ok(None)` when
+    /// none does, a warning naming them, or an error when they leave no more than
+    /// `all_but` of the `cameras` to carve (the hull would fill the whole box).
+    pub fn full_problem(
+        &self,
+        frame: u32,
+        all_but: usize,
+        cameras: usize,
+    ) -> std::result::Result<Option<String>, String> {
+        if self.full.is_empty() {
+            return Ok(None);
+        }
+        let message = format!(
+            "masks of frame {frame}: camera(s) {} cover the whole image, so they carve nothing \
+             (inverted, or all white? the subject is 255, the background 0)",
+            self.full.join(", ")
+        );
+        if self.full.len() + all_but >= cameras {
+            return Err(format!("{message}; the hull would fill the whole box"));
+        }
+        Ok(Some(message))
+    }
+
     /// Why a hull carved from these silhouettes is empty, in the user's terms.
     pub fn why_empty(&self) -> String {
         if self.empty.is_empty() {

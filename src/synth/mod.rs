@@ -47,7 +47,7 @@ fn box_yaml(
     cams: &[crate::camera::Camera],
     seq_dir: &std::path::Path,
     frame: u32,
-    bounds: (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>),
+    bounds: Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)>,
 ) -> Result<String> {
     use crate::stages::visual_hull::{self, MaskCounts, VisualHullParams};
     let p = VisualHullParams::default();
@@ -69,10 +69,10 @@ fn box_yaml(
         )
         .is_ok()
     });
-    if fits {
+    let Some((lo, hi)) = bounds.filter(|_| !fits) else {
         return Ok(String::new());
-    }
-    let (lo, hi) = (bounds.0.add_scalar(-0.1), bounds.1.add_scalar(0.1));
+    };
+    let (lo, hi) = (lo.add_scalar(-0.1), hi.add_scalar(0.1));
     let r = |v: f64| (v * 100.0).round() / 100.0;
     Ok(format!(
         "# the box the silhouettes of so few cameras leave is too large: the subject's own\n\
@@ -369,14 +369,8 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     let bounds = posed
         .iter()
         .skip(first)
-        .flat_map(|(m, _, _)| &m.vertices)
-        .fold(
-            (
-                nalgebra::Vector3::repeat(f64::INFINITY),
-                nalgebra::Vector3::repeat(f64::NEG_INFINITY),
-            ),
-            |(lo, hi), v| (lo.inf(v), hi.sup(v)),
-        );
+        .filter_map(|(mesh, _, _)| mesh.bounds())
+        .reduce(|(a, b), (c, d)| (a.inf(&c), b.sup(&d)));
     crate::fsutil::write_atomic(
         &pipeline_yaml,
         format!(
