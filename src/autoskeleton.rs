@@ -231,7 +231,7 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
         )
     })?;
     let template = template.load()?;
-    let up = crate::export::axes::up_vector(up);
+    let up = crate::geometry::axes::up_vector(up);
     let candidates = match frame {
         Some(f) if !job.frames.contains(&f) => {
             return Err(Error::Usage(format!(
@@ -347,7 +347,7 @@ fn write_bones(path: &Path, skeleton: &Skeleton) -> Result<()> {
             mesh.triangles.push([base, c, a]);
             mesh.triangles.push([base + 5, a, c]);
         }
-        colours.extend([crate::stages::model::part_colour(b); 6]);
+        colours.extend([crate::skeleton::model::part_colour(b); 6]);
     }
     write_ply(
         path,

@@ -3,8 +3,8 @@
 
 use crate::error::Result;
 use crate::geometry::isosurface::{self, ScalarGrid};
+use crate::recon::visual_hull::{self, MaskCounts};
 use crate::runner::Job;
-use crate::stages::visual_hull::{self, MaskCounts};
 use nalgebra::Vector3;
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -136,7 +136,7 @@ pub fn maxflow_fixture(n: usize) -> String {
 
 /// Times the graph-cut stage's steps on one frame (needs its hull in the cache).
 pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
-    use crate::stages::graphcut as gc;
+    use crate::recon::graphcut as gc;
     let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let cams = &job.sequence.cameras;
     let p = &job.config.graphcut;
@@ -201,7 +201,7 @@ pub fn reliability(
     dump: Option<&std::path::Path>,
     pairs: usize,
 ) -> Result<String> {
-    use crate::stages::reliability;
+    use crate::recon::reliability;
     use rayon::prelude::*;
     let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let p = &job.config.reliability;

@@ -2,14 +2,14 @@
 //! file. Unknown keys and wrong types are errors naming the key and the line.
 
 use crate::error::{Error, Result};
-use crate::export::ExportParams;
 use crate::fit::FitParams;
-use crate::stages::graphcut::{self, GraphcutParams};
-use crate::stages::model::{self, ModelParams};
-use crate::stages::reliability::{self, ReliabilityParams};
-use crate::stages::silhouette::SilhouetteParams;
-use crate::stages::visual_hull::{self, VisualHullParams};
-use serde::Deserialize;
+use crate::geometry::axes::{RotationOrder, UpAxis};
+use crate::recon::graphcut::{self, GraphcutParams};
+use crate::recon::reliability::{self, ReliabilityParams};
+use crate::recon::silhouette::SilhouetteParams;
+use crate::recon::visual_hull::{self, VisualHullParams};
+use crate::skeleton::model::{self, ModelParams};
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// An inclusive range of frame indices.
@@ -146,7 +146,7 @@ impl Config {
         reliability::validate(&config.reliability).map_err(|m| Error::invalid(path, m))?;
         model::validate(&config.model).map_err(|m| Error::invalid(path, m))?;
         crate::fit::validate(&config.fit).map_err(|m| Error::invalid(path, m))?;
-        crate::export::validate(&config.export).map_err(|m| Error::invalid(path, m))?;
+        validate_export(&config.export).map_err(|m| Error::invalid(path, m))?;
         if let Some(mesh) = config.model.mesh.as_ref().filter(|m| !m.is_file()) {
             return Err(Error::invalid(
                 path,
@@ -218,4 +218,84 @@ pub fn default_yaml(calibration: &str, sequence: &str) -> String {
          cache: cache\n\
          output: output\n"
     )
+}
+
+/// One export format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// glTF 2.0 binary: the skinned body model with the fitted motion as an animation.
+    Glb,
+    /// BVH: the skeleton hierarchy and the fitted motion.
+    Bvh,
+    /// Binary PLY of every reconstruction's meshes (normals, colours, quality).
+    Ply,
+    /// Wavefront OBJ of every reconstruction's meshes (normals, vertex colours).
+    Obj,
+    /// PNG overlays of the fitted skeleton and the silhouette outline on the input frames,
+    /// and a contact sheet of all cameras per frame.
+    Overlay,
+}
+
+impl Format {
+    pub const ALL: [Format; 5] = [
+        Format::Glb,
+        Format::Bvh,
+        Format::Ply,
+        Format::Obj,
+        Format::Overlay,
+    ];
+
+    /// Whether the format needs the fitted motion (a skeleton).
+    pub fn needs_motion(self) -> bool {
+        matches!(self, Format::Glb | Format::Bvh | Format::Overlay)
+    }
+}
+
+/// Parameters of the exports (pipeline.yaml key `export`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExportParams {
+    /// What `pipeline run` exports after the fit (default: every format but OBJ, which
+    /// holds the same meshes as the PLY files at three times their size).
+    pub formats: Vec<Format>,
+    /// Capture frame rate, frames per second: the animation's timing (glb, bvh).
+    pub frame_rate: f64,
+    /// The world's up direction (`+x`, `-x`, `+y`, `-y`, `+z`, `-z`), when known: glb and
+    /// bvh are turned so that it becomes +Y, as both formats expect. Unset: the world axes
+    /// are written unchanged.
+    pub up_axis: Option<UpAxis>,
+    /// Euler rotation order of the BVH channels (`ZXY`, `XYZ`, ...): the rotation is
+    /// R = R_first R_second R_third, angles in degrees.
+    pub bvh_rotation_order: String,
+    /// Cameras whose views get skeleton overlays (empty: the first camera).
+    pub overlay_cameras: Vec<String>,
+    /// Whether a contact sheet of all cameras is drawn per frame.
+    pub contact_sheet: bool,
+}
+
+impl Default for ExportParams {
+    fn default() -> Self {
+        ExportParams {
+            formats: vec![Format::Glb, Format::Bvh, Format::Ply, Format::Overlay],
+            frame_rate: 25.0,
+            up_axis: None,
+            bvh_rotation_order: "ZXY".into(),
+            overlay_cameras: Vec::new(),
+            contact_sheet: true,
+        }
+    }
+}
+
+/// Checks the parameters; the message names the key.
+pub fn validate_export(p: &ExportParams) -> std::result::Result<(), String> {
+    if !(p.frame_rate.is_finite() && p.frame_rate > 0.0) {
+        return Err(format!(
+            "key 'export.frame_rate': {} is not a positive number of frames per second",
+            p.frame_rate
+        ));
+    }
+    RotationOrder::parse(&p.bvh_rotation_order)
+        .map_err(|m| format!("key 'export.bvh_rotation_order': {m}"))?;
+    Ok(())
 }

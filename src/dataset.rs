@@ -134,6 +134,20 @@ fn list_frames(dir: &Path, warnings: &mut Vec<String>) -> Result<Vec<(u32, &'sta
 }
 
 impl Sequence {
+    /// The index of the camera named `name` in the sequence's calibration (read from
+    /// `calibration`, named in the error).
+    pub fn camera_index(&self, calibration: &Path, name: &str) -> Result<usize> {
+        self.cameras
+            .iter()
+            .position(|c| c.name == name)
+            .ok_or_else(|| {
+                Error::Usage(format!(
+                    "no camera named '{name}' in {}",
+                    calibration.display()
+                ))
+            })
+    }
+
     /// Opens the sequence in `dir` for the cameras of `cameras`; `calib_path` names the
     /// calibration in messages. Checks that every calibrated camera has a frame folder
     /// holding every frame, that image sizes match the calibration (from the headers), and

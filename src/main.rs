@@ -114,7 +114,7 @@ enum Command {
         file: PathBuf,
         /// Formats to write (repeat or comma-separate; default: export.formats).
         #[arg(long, value_enum, value_delimiter = ',')]
-        format: Vec<hullpose::export::Format>,
+        format: Vec<hullpose::config::Format>,
         /// Frames, A..B inclusive (overrides pipeline.yaml).
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
@@ -345,7 +345,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 until,
                 force,
             };
-            let reports = hullpose::runner::run(&job, &opts)?;
+            let reports = hullpose::commands::run::run(&job, &opts)?;
             let (mut computed, mut reused) = (0, 0);
             for r in &reports {
                 println!(

@@ -2,13 +2,11 @@
 //! beside the frame it explains.
 
 use crate::camera::Camera;
-use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
 use crate::runner::Job;
 use image::{GrayImage, Rgb, RgbImage};
 use nalgebra::{Vector2, Vector3};
-use std::path::Path;
 
 /// The frame with the silhouette's outline in green (left) beside `mesh` rendered through
 /// `cam` with grey Lambert shading lit from the camera, silhouette pixels the mesh misses
@@ -127,7 +125,7 @@ pub fn skeleton_on_frame(
     for (b, p) in projected.iter().enumerate() {
         if let Some((h, t)) = p {
             segment(&mut out, *h, *t, r + 1.0, [0, 0, 0]);
-            segment(&mut out, *h, *t, r, crate::stages::model::part_colour(b));
+            segment(&mut out, *h, *t, r, crate::skeleton::model::part_colour(b));
         }
     }
     for (h, t) in projected.iter().flatten() {
@@ -137,20 +135,6 @@ pub fn skeleton_on_frame(
         }
     }
     out
-}
-
-/// The index of the camera named `name` in the sequence's calibration (read from
-/// `calibration`, named in the error).
-pub fn camera_index(seq: &Sequence, calibration: &Path, name: &str) -> Result<usize> {
-    seq.cameras
-        .iter()
-        .position(|c| c.name == name)
-        .ok_or_else(|| {
-            Error::Usage(format!(
-                "no camera named '{name}' in {}",
-                calibration.display()
-            ))
-        })
 }
 
 /// Tiles `images` (with their `labels`) into one picture, `columns` per row, each shrunk to
@@ -224,7 +208,7 @@ pub fn hull_beside_frame(
     let seq = &job.sequence;
     let c = match camera {
         None => 0,
-        Some(name) => camera_index(seq, &job.config.calibration, name)?,
+        Some(name) => seq.camera_index(&job.config.calibration, name)?,
     };
     let ctx = crate::stages::Context::new(&job.config, seq, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;

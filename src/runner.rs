@@ -130,11 +130,11 @@ impl Job {
         }
         crate::camera::check_cameras_look_at_the_scene(cameras)
             .map_err(|m| Error::invalid(calibration, m))?;
-        crate::stages::visual_hull::validate_for_cameras(&self.config.visual_hull, cameras.len())
+        crate::recon::visual_hull::validate_for_cameras(&self.config.visual_hull, cameras.len())
             .map_err(|m| Error::invalid(&self.config.path, m))?;
         self.reference_frame()?;
         for name in &self.config.export.overlay_cameras {
-            crate::overlay::camera_index(&self.sequence, calibration, name).map_err(|e| {
+            self.sequence.camera_index(calibration, name).map_err(|e| {
                 Error::invalid(&self.config.path, format!("export.overlay_cameras: {e}"))
             })?;
         }
@@ -158,7 +158,7 @@ impl Job {
                 masks.push(m);
             }
         }
-        let cov = crate::stages::silhouette::Coverage::of(&seq.cameras, &masks);
+        let cov = crate::recon::silhouette::Coverage::of(&seq.cameras, &masks);
         let full = cov.full_problem(frame, self.config.visual_hull.all_but, seq.cameras.len());
         let mut out: Vec<String> = full
             .map_err(|m| Error::invalid(seq.dir.join("masks"), m))?
@@ -203,7 +203,7 @@ impl Job {
     fn stage_frames(&self, stage: &StageDef, reference: Option<u32>) -> Vec<u32> {
         let Some(t0) = reference else {
             return match stage.scope {
-                Scope::PerFrame | Scope::Sequence => self.frames.clone(),
+                Scope::PerFrame => self.frames.clone(),
                 _ => Vec::new(),
             };
         };
@@ -228,7 +228,6 @@ impl Job {
         match stage.scope {
             Scope::Reference => vec![t0],
             Scope::Tracked => tracked(),
-            Scope::Sequence => self.frames.clone(),
             Scope::PerFrame => {
                 let mut frames = self.frames.clone();
                 frames.extend(tracked());
@@ -284,7 +283,7 @@ impl Job {
     fn keys(&self, reference: Option<u32>) -> Result<HashMap<(&'static str, u32), String>> {
         let ctx = self.context();
         let mut keys: HashMap<(&'static str, u32), String> = HashMap::new();
-        for stage in STAGES.iter().filter(|s| s.scope != Scope::Sequence) {
+        for stage in STAGES {
             let params = (stage.params)(&self.config);
             let frames = self.stage_frames(stage, reference);
             let key_of = |f: u32, keys: &HashMap<(&'static str, u32), String>| -> Result<String> {
@@ -606,27 +605,12 @@ impl StageRun<'_> {
             .collect())
     }
 
-    /// Runs one stage over its frames: sequence stages once, the reference stage on t0,
+    /// Runs one stage over its frames: the reference stage on t0,
     /// the tracked stage in order from t0.
     fn stage(&self, stage: &'static StageDef, forced: bool) -> Result<StageReport> {
         let start = Instant::now();
         let ctx = self.ctx;
         let frames = self.job.stage_frames(stage, self.reference);
-        if stage.scope == Scope::Sequence {
-            let finished = match stage.finish {
-                Some(finish) => finish(ctx, &frames)?,
-                None => Default::default(),
-            };
-            return Ok(StageReport {
-                stage: stage.name,
-                computed: finished.files,
-                reused: 0,
-                seconds: start.elapsed().as_secs_f64(),
-                location: self.job.config.output.clone(),
-                warnings: finished.warnings,
-                outputs: finished.outputs,
-            });
-        }
         if stage.scope != Scope::PerFrame && frames.is_empty() {
             return Ok(StageReport {
                 stage: stage.name,
@@ -694,7 +678,6 @@ pub fn status(job: &Job) -> Result<Vec<StageStatus>> {
     let keys = job.keys(reference)?;
     Ok(STAGES
         .iter()
-        .filter(|s| s.scope != Scope::Sequence)
         .map(|s| {
             let mut st = StageStatus {
                 stage: s.name,

@@ -11,7 +11,7 @@
 mod common;
 
 use common::*;
-use hullpose::export::axes::{to_y_up, UpAxis};
+use hullpose::geometry::axes::{to_y_up, UpAxis};
 use hullpose::skeleton::Skeleton;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde_json::Value;

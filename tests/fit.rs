@@ -89,7 +89,7 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let probe = hullpose::fit::Probe::default();
     let (dir, skeleton, poses) = truth();
     let model =
-        hullpose::stages::model::build(&skeleton, &mesh(dir.path(), 0), &Default::default())
+        hullpose::skeleton::model::build(&skeleton, &mesh(dir.path(), 0), &Default::default())
             .unwrap();
     for method in [Method::Proposed, Method::Icp] {
         let fitter = Fitter::new(

@@ -35,7 +35,7 @@ fn mesh(dir: &Path, stage: &str, frame: u32) -> TriMesh {
 
 fn grid(dir: &Path, stage: &str, frame: u32) -> (GridSpec, Vec<f32>) {
     let path = dir.join(format!("cache/{stage}/{frame:06}.grid"));
-    hullpose::stages::visual_hull::parse_grid(&path, &std::fs::read(&path).unwrap()).unwrap()
+    hullpose::recon::visual_hull::parse_grid(&path, &std::fs::read(&path).unwrap()).unwrap()
 }
 
 /// Over true-surface samples seen by at least two cameras where the hull lies more than two

@@ -44,7 +44,7 @@ fn a_masks_only_humanoid_is_tracked_within_two_and_a_half_centimetres() {
     assert_eq!(hull.vertices, refined.vertices);
     assert_eq!(hull.triangles, refined.triangles);
     let path = d.join("cache/reliability/000003.obs");
-    let obs = hullpose::stages::reliability::Observed::parse(&path, &std::fs::read(&path).unwrap())
+    let obs = hullpose::recon::reliability::Observed::parse(&path, &std::fs::read(&path).unwrap())
         .unwrap();
     assert!(!obs.rho_p.is_empty() && obs.rho_p.iter().all(|&r| r == 1.0));
 

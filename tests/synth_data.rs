@@ -130,7 +130,7 @@ fn opencv_project(c: &Camera, x: &Vector3<f64>) -> Vector2<f64> {
 #[test]
 fn projection_is_opencvs_formula_and_backprojection_inverts_it() {
     let seq = open(&tripod().root, "tripod");
-    let mut rng = hullpose::synth::rng::Rng::new(3, 3);
+    let mut rng = hullpose::rng::Rng::new(3, 3);
     for cam in &seq.cameras {
         let mut skewed = cam.clone();
         skewed.skew = 1.5;

@@ -5,7 +5,7 @@
 mod common;
 
 use common::*;
-use hullpose::stages::reliability::Observed;
+use hullpose::recon::reliability::Observed;
 use hullpose::synth::{SceneKind, SynthOptions};
 use std::sync::OnceLock;
 

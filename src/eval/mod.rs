@@ -183,7 +183,7 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
             let mesh = crate::geometry::ply::read_ply(&dir.join(&ply))?;
             let path = dir.join(&grid_file);
             let data = crate::limits::read_cache_file(&path)?;
-            let (grid, sdf) = crate::stages::visual_hull::parse_grid(&path, &data)?;
+            let (grid, sdf) = crate::recon::visual_hull::parse_grid(&path, &data)?;
             let score = score(
                 &mesh,
                 &grid,
@@ -251,7 +251,7 @@ fn pixel_tables(job: &Job) -> Vec<crate::geometry::raster::PixelRays> {
 /// the cache: silhouette coverage per camera and the mean photo-consistency over seen
 /// vertices. Returns the printed report and the CSV.
 pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
-    use crate::stages::graphcut;
+    use crate::recon::graphcut;
     let mut report = String::new();
     let mut csv = String::from(
         "frame,stage,camera,silhouette_coverage,mean_vertex_zncc,seen_vertices,silhouette_iou\n",
@@ -271,7 +271,7 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
             let mesh = crate::geometry::ply::read_ply(&dir.join(ply))?;
             let path = dir.join(grid_file);
             let data = crate::limits::read_cache_file(&path)?;
-            let (grid, _) = crate::stages::visual_hull::parse_grid(&path, &data)?;
+            let (grid, _) = crate::recon::visual_hull::parse_grid(&path, &data)?;
             let (zncc, seen) = graphcut::mean_vertex_consistency(
                 &job.sequence.cameras,
                 &images,

@@ -10,10 +10,10 @@
 //! WEIGHTS_0, renormalized), normals and part colours (COLOR_0). glTF's joint matrices
 //! `world_b · IBM_b` then reproduce the model's linear blend skinning exactly.
 //!
-//! Axes: with a known up axis every position is turned by C ([`super::axes::to_y_up`]) and
+//! Axes: with a known up axis every position is turned by C ([`crate::geometry::axes::to_y_up`]) and
 //! every rotation R becomes C R Cᵀ, so the scene stands on glTF's +Y.
 
-use super::axes::{to_y_up, UpAxis};
+use crate::geometry::axes::{to_y_up, UpAxis};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::Pose;
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
@@ -156,7 +156,7 @@ pub fn to_glb(
         .labels
         .iter()
         .flat_map(|&l| {
-            let [r, g, b] = crate::stages::model::part_colour(l);
+            let [r, g, b] = crate::skeleton::model::part_colour(l);
             [r, g, b, 255]
         })
         .collect();

@@ -8,8 +8,8 @@
 //! (refined surface, with raw `zncc`, `rho_p` and `cameras` beside it when the reliability
 //! is cached) and the part index (fit, model).
 
-use super::Format;
 use crate::camera::Camera;
+use crate::config::Format;
 use crate::error::Result;
 use crate::geometry::obj::write_obj;
 use crate::geometry::ply::{read_ply, write_ply, PlyFormat, VertexAttributes};
@@ -140,7 +140,7 @@ impl<'a> MeshExport<'a> {
         let (part_colours, parts): (Vec<[u8; 3]>, Vec<f32>) = model
             .iter()
             .flat_map(|m| &m.labels)
-            .map(|&l| (crate::stages::model::part_colour(l), l as f32))
+            .map(|&l| (crate::skeleton::model::part_colour(l), l as f32))
             .unzip();
         let mut files = 0;
         if let Some(m) = &model {

@@ -8,101 +8,18 @@
 //! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit) and
 //! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `overlays/contact/NNNNNN.png`.
 
-pub mod axes;
 pub mod bvh;
 pub mod gltf;
 pub mod meshes;
 pub mod overlays;
 
+use crate::config::Format;
 use crate::error::{Error, Result};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::Pose;
 use crate::stages::{Context, Finished};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
-
-pub use axes::UpAxis;
-
-/// One export format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Format {
-    /// glTF 2.0 binary: the skinned body model with the fitted motion as an animation.
-    Glb,
-    /// BVH: the skeleton hierarchy and the fitted motion.
-    Bvh,
-    /// Binary PLY of every reconstruction's meshes (normals, colours, quality).
-    Ply,
-    /// Wavefront OBJ of every reconstruction's meshes (normals, vertex colours).
-    Obj,
-    /// PNG overlays of the fitted skeleton and the silhouette outline on the input frames,
-    /// and a contact sheet of all cameras per frame.
-    Overlay,
-}
-
-impl Format {
-    pub const ALL: [Format; 5] = [
-        Format::Glb,
-        Format::Bvh,
-        Format::Ply,
-        Format::Obj,
-        Format::Overlay,
-    ];
-
-    /// Whether the format needs the fitted motion (a skeleton).
-    fn needs_motion(self) -> bool {
-        matches!(self, Format::Glb | Format::Bvh | Format::Overlay)
-    }
-}
-
-/// Parameters of the exports (pipeline.yaml key `export`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ExportParams {
-    /// What `pipeline run` exports after the fit (default: every format but OBJ, which
-    /// holds the same meshes as the PLY files at three times their size).
-    pub formats: Vec<Format>,
-    /// Capture frame rate, frames per second: the animation's timing (glb, bvh).
-    pub frame_rate: f64,
-    /// The world's up direction (`+x`, `-x`, `+y`, `-y`, `+z`, `-z`), when known: glb and
-    /// bvh are turned so that it becomes +Y, as both formats expect. Unset: the world axes
-    /// are written unchanged.
-    pub up_axis: Option<UpAxis>,
-    /// Euler rotation order of the BVH channels (`ZXY`, `XYZ`, ...): the rotation is
-    /// R = R_first R_second R_third, angles in degrees.
-    pub bvh_rotation_order: String,
-    /// Cameras whose views get skeleton overlays (empty: the first camera).
-    pub overlay_cameras: Vec<String>,
-    /// Whether a contact sheet of all cameras is drawn per frame.
-    pub contact_sheet: bool,
-}
-
-impl Default for ExportParams {
-    fn default() -> Self {
-        ExportParams {
-            formats: vec![Format::Glb, Format::Bvh, Format::Ply, Format::Overlay],
-            frame_rate: 25.0,
-            up_axis: None,
-            bvh_rotation_order: "ZXY".into(),
-            overlay_cameras: Vec::new(),
-            contact_sheet: true,
-        }
-    }
-}
-
-/// Checks the parameters; the message names the key.
-pub fn validate(p: &ExportParams) -> std::result::Result<(), String> {
-    if !(p.frame_rate.is_finite() && p.frame_rate > 0.0) {
-        return Err(format!(
-            "key 'export.frame_rate': {} is not a positive number of frames per second",
-            p.frame_rate
-        ));
-    }
-    bvh::RotationOrder::parse(&p.bvh_rotation_order)
-        .map_err(|m| format!("key 'export.bvh_rotation_order': {m}"))?;
-    Ok(())
-}
 
 /// The export folder of a job.
 pub fn folder(job_output: &std::path::Path) -> PathBuf {
@@ -216,7 +133,7 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
             }
             Format::Bvh => {
                 let (model, poses) = motion.as_ref().expect("loaded");
-                let order = bvh::RotationOrder::parse(&p.bvh_rotation_order)
+                let order = crate::geometry::axes::RotationOrder::parse(&p.bvh_rotation_order)
                     .map_err(|m| Error::invalid(&ctx.config.path, m))?;
                 let path = out.join(format!("{name}.bvh"));
                 let text = bvh::to_bvh(&model.skeleton, poses, p.frame_rate, p.up_axis, order);

@@ -4,7 +4,7 @@
 //! sheet of all cameras per frame.
 
 use crate::error::Result;
-use crate::overlay::{camera_index, contact_sheet, skeleton_on_frame};
+use crate::overlay::{contact_sheet, skeleton_on_frame};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::Pose;
 use crate::stages::Context;
@@ -23,7 +23,7 @@ pub fn chosen_cameras(ctx: &Context) -> Result<Vec<usize>> {
     }
     p.overlay_cameras
         .iter()
-        .map(|name| camera_index(ctx.sequence, &ctx.config.calibration, name))
+        .map(|name| ctx.sequence.camera_index(&ctx.config.calibration, name))
         .collect()
 }
 

@@ -440,7 +440,7 @@ mod tests {
                 tail: corners[k + 1],
             })
             .collect();
-        let mut rnd = crate::synth::rng::chained_uniform(11);
+        let mut rnd = crate::rng::chained_uniform(11);
         let (mut vertices, mut labels) = (Vec::new(), Vec::new());
         for (k, b) in bones.iter().enumerate() {
             for _ in 0..1500 {

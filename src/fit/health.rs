@@ -212,7 +212,7 @@ mod tests {
                 (c.x.abs().max(c.y.abs()).max(c.z.abs()) - 0.25) as f32
             })
             .collect();
-        let cube = crate::stages::visual_hull::mesh_sdf(&grid, &sdf);
+        let cube = crate::recon::visual_hull::mesh_sdf(&grid, &sdf);
         let silhouette = |dx: f64| {
             GrayImage::from_fn(640, 480, |x, y| {
                 let p = nalgebra::Vector2::new(x as f64, y as f64);

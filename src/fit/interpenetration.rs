@@ -97,10 +97,10 @@ mod tests {
     fn a_forearm_pushed_into_the_chest_overlaps() {
         let body = crate::synth::humanoid::standard_body();
         let mesh = body.rest_mesh(0.02);
-        let model = crate::stages::model::build(
+        let model = crate::skeleton::model::build(
             &body.skeleton,
             &mesh,
-            &crate::stages::model::ModelParams::default(),
+            &crate::skeleton::model::ModelParams::default(),
         )
         .unwrap();
         let capsules = Capsules::new(&model);

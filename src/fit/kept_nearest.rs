@@ -340,7 +340,7 @@ mod tests {
     /// steps: each round's kept answers equal a fresh search's, point for point, and most
     /// are reused.
     fn lattice(seed: u64, count: usize) -> (Vec<[f32; 3]>, impl FnMut() -> f64) {
-        let mut rnd = crate::synth::rng::chained_uniform(seed);
+        let mut rnd = crate::rng::chained_uniform(seed);
         let points = (0..count)
             .map(|_| {
                 let mut c = || (rnd() * 20.0).floor() * 0.01 + 1.0;

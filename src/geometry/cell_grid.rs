@@ -194,7 +194,7 @@ mod tests {
     /// from a millimetre to beyond the grid, with queries inside and outside the box.
     #[test]
     fn agrees_with_the_tree() {
-        let mut rnd = crate::synth::rng::chained_uniform(5);
+        let mut rnd = crate::rng::chained_uniform(5);
         let mut unsure = 0;
         for lattice in [false, true] {
             let keys: Vec<[f32; 3]> = (0..3000)

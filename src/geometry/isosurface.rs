@@ -272,7 +272,7 @@ mod tests {
 
     #[test]
     fn random_fields_give_closed_oriented_surfaces() {
-        let mut rng = crate::synth::rng::Rng::new(9, 9);
+        let mut rng = crate::rng::Rng::new(9, 9);
         for trial in 0..20 {
             let n = 6 + trial % 5;
             let mut values = vec![1.0f32; n * n * n];

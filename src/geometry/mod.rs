@@ -1,6 +1,7 @@
 //! Geometry: triangle meshes and their file formats, voxel grids, distance transforms,
 //! iso-surface extraction, rasterization, smoothing and nearest-point queries.
 
+pub mod axes;
 pub mod cell_grid;
 pub mod cone_distance;
 pub mod distance;

@@ -198,7 +198,7 @@ mod tests {
     /// marching-cubes vertices do).
     #[test]
     fn agrees_with_brute_force() {
-        let mut uniform = crate::synth::rng::chained_uniform(7);
+        let mut uniform = crate::rng::chained_uniform(7);
         let mut rnd = move || (uniform() * 20.0).floor() * 0.01;
         let points: Vec<Vector3<f64>> = (0..3000)
             .map(|_| Vector3::new(rnd(), rnd(), rnd()))

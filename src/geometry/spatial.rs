@@ -99,7 +99,7 @@ mod tests {
 
     #[test]
     fn agrees_with_brute_force() {
-        let mut rng = crate::synth::rng::Rng::new(1, 1);
+        let mut rng = crate::rng::Rng::new(1, 1);
         let pts: Vec<Vector3<f64>> = (0..500)
             .map(|_| Vector3::new(rng.uniform(), rng.uniform(), rng.uniform()))
             .collect();

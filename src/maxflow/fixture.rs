@@ -21,7 +21,7 @@ pub fn fixture_graph(n: usize) -> GridGraph {
                 let field = (s - rd * rd).abs() / n as i64;
                 for (a, c) in [x, y, z].into_iter().enumerate() {
                     if c + 1 < n {
-                        let hash = crate::synth::rng::mix64(3 * i as u64 + a as u64);
+                        let hash = crate::rng::mix64(3 * i as u64 + a as u64);
                         let w = 1 + field.min(200) as u64 + hash % 8;
                         g.set_edge(i, a, w as f32, w as f32);
                     }

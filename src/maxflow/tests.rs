@@ -4,7 +4,7 @@ use crate::maxflow::fixture::fixture_graph;
 #[test]
 fn splitmix_matches_the_fixture_definition() {
     // splitmix64(0) from the reference definition.
-    assert_eq!(crate::synth::rng::mix64(0), 0xE220A8397B1DCDAF);
+    assert_eq!(crate::rng::mix64(0), 0xE220A8397B1DCDAF);
 }
 
 /// The fixture values PyMaxflow computed (shared/fixtures/maxflow/expected.json).
@@ -85,7 +85,7 @@ fn edmonds_karp(cap: &[Vec<f64>], s: usize, t: usize) -> f64 {
 
 /// One random grid graph (integer capacities, some zero) beside its dense capacity matrix
 /// (nodes 0..n, source n, sink n + 1).
-fn random_grid(rng: &mut crate::synth::rng::Rng, dims: [usize; 3]) -> (GridGraph, Vec<Vec<f64>>) {
+fn random_grid(rng: &mut crate::rng::Rng, dims: [usize; 3]) -> (GridGraph, Vec<Vec<f64>>) {
     let n = dims[0] * dims[1] * dims[2];
     let mut cap = vec![vec![0.0; n + 2]; n + 2];
     let mut g = GridGraph::new(dims);
@@ -121,7 +121,7 @@ fn random_grid(rng: &mut crate::synth::rng::Rng, dims: [usize; 3]) -> (GridGraph
 /// exactly the flow.
 #[test]
 fn random_grids_agree_with_edmonds_karp_and_the_cut_equals_the_flow() {
-    let mut rng = crate::synth::rng::Rng::new(42, 0);
+    let mut rng = crate::rng::Rng::new(42, 0);
     let pools = [1, 2].map(|t| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(t)

@@ -226,7 +226,7 @@ pub(crate) mod tests {
 
     /// Repeatable numbers uniform in [-1, 1) for tests, from `seed`.
     pub(crate) fn signed_uniform(seed: u64) -> impl FnMut() -> f64 {
-        let mut uniform = crate::synth::rng::chained_uniform(seed);
+        let mut uniform = crate::rng::chained_uniform(seed);
         move || uniform() * 2.0 - 1.0
     }
 

@@ -371,7 +371,7 @@ fn write_frame(
     let colours: Vec<[u8; 3]> = model
         .labels
         .iter()
-        .map(|&l| super::model::part_colour(l))
+        .map(|&l| crate::skeleton::model::part_colour(l))
         .collect();
     let normals = mesh.vertex_normals();
     write_ply(

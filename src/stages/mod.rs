@@ -6,11 +6,7 @@
 
 pub mod fit;
 pub mod fit_state;
-pub mod graphcut;
 pub mod model;
-pub mod reliability;
-pub mod silhouette;
-pub mod visual_hull;
 
 use crate::cache::{Cache, KeyBuilder};
 use crate::config::Config;
@@ -19,8 +15,9 @@ use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
 use crate::photo::GreyImage;
+use crate::recon::silhouette::{self, SilhouetteMethod};
+use crate::recon::{graphcut, reliability, visual_hull};
 use rayon::prelude::*;
-use silhouette::SilhouetteMethod;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
@@ -77,9 +74,6 @@ pub enum Scope {
     /// One artifact per frame from t0 to the selected frames, computed in order from t0,
     /// each from its neighbour's (the fit). Skipped when the sequence has no skeleton.yaml.
     Tracked,
-    /// No per-frame artifacts: after its inputs, its `finish` writes outputs for the
-    /// selected frames from the cache (the exports). It always runs; it computes nothing.
-    Sequence,
 }
 
 /// A stage as the runner sees it.
@@ -197,7 +191,7 @@ pub const STAGES: &[StageDef] = &[
         // The mesh's content is in the key (`model::sources`), its path is not.
         params: |c| {
             let mesh = c.model.mesh.is_some().then(|| "given".into());
-            crate::yaml::to_string(&model::ModelParams {
+            crate::yaml::to_string(&crate::skeleton::model::ModelParams {
                 mesh,
                 ..c.model.clone()
             })
@@ -225,23 +219,7 @@ pub const STAGES: &[StageDef] = &[
         compute: Compute::Tracked(fit::compute),
         finish: Some(fit::finish),
     },
-    StageDef {
-        name: "export",
-        scope: Scope::Sequence,
-        about: "glb, bvh, ply, obj and overlay exports of the cached results",
-        inputs: &["visual_hull", "graphcut", "reliability", "model", "fit"],
-        format_version: 1,
-        params: |c| crate::yaml::to_string(&c.export).unwrap_or_default(),
-        sources: |_, _, _| Ok(()),
-        compute: Compute::Frame(|_, _| Ok(Output::default())),
-        finish: Some(export_finish),
-    },
 ];
-
-/// The export stage: every format `export.formats` lists, for the selected frames.
-fn export_finish(ctx: &Context, frames: &[u32]) -> Result<Finished> {
-    crate::export::run(ctx, frames, &ctx.config.export.formats)
-}
 
 /// The stage named `name`, or an error listing the stages.
 pub fn find(name: &str) -> Result<&'static StageDef> {

@@ -52,7 +52,7 @@ impl Proportions {
     /// A body drawn from `seed` (`pipeline synth --body SEED`): its height within 15% of
     /// the standard's, its arms, legs, torso and width each within a further 7%.
     pub fn from_seed(seed: u64) -> Proportions {
-        let mut rng = super::rng::Rng::new(seed, 9_000_000);
+        let mut rng = crate::rng::Rng::new(seed, 9_000_000);
         let mut uniform = |half: f64| 1.0 + half * (2.0 * rng.uniform() - 1.0);
         let height = uniform(0.15);
         Proportions {

@@ -8,7 +8,6 @@
 pub mod body;
 pub mod humanoid;
 pub mod render;
-pub mod rng;
 pub mod scene;
 pub mod texture;
 pub mod tripod;
@@ -49,7 +48,7 @@ fn box_yaml(
     frame: u32,
     bounds: Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)>,
 ) -> Result<String> {
-    use crate::stages::visual_hull::{self, MaskCounts, VisualHullParams};
+    use crate::recon::visual_hull::{self, MaskCounts, VisualHullParams};
     let p = VisualHullParams::default();
     let counts = cams
         .iter()
@@ -304,7 +303,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
             plain: &subject.plain,
         };
         // A slight frame-to-frame brightness flicker, as real lighting has.
-        let flicker = 1.0 + 0.01 * rng::Rng::new(opts.seed, 500_000 + f as u64).normal();
+        let flicker = 1.0 + 0.01 * crate::rng::Rng::new(opts.seed, 500_000 + f as u64).normal();
         let stream = (f * nc + c) as u64;
         let (img, mask) =
             render::render_frame(cam, &views[c], &surface, shadow, flicker, opts.seed, stream);

@@ -2,11 +2,11 @@
 //! textured subject (rasterized), a soft floor shadow, per-camera gain and offset, a slight
 //! per-frame brightness flicker, and Gaussian pixel noise.
 
-use super::rng::Rng;
 use super::texture;
 use crate::camera::Camera;
 use crate::geometry::raster::{self, PixelRays};
 use crate::geometry::TriMesh;
+use crate::rng::Rng;
 use image::{GrayImage, RgbImage};
 use nalgebra::Vector3;
 

@@ -1,8 +1,8 @@
 //! What every synthetic scene provides, and the camera ring they share.
 
 use super::body::{Body, Pose};
-use super::rng::Rng;
 use crate::camera::Camera;
+use crate::rng::Rng;
 use nalgebra::Vector3;
 
 /// A synthetic scene: a body, its poses over frames, and the cameras filming it.

@@ -1,7 +1,7 @@
 //! Procedural textures defined on 3D coordinates (rest-pose coordinates for the subject, so
 //! the pattern moves with the surface; world coordinates for the room).
 
-use super::rng::mix64;
+use crate::rng::mix64;
 use nalgebra::Vector3;
 
 /// Smooth 3D value noise in [0, 1] with unit lattice spacing; `salt` picks the pattern.

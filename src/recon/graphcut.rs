@@ -568,7 +568,7 @@ pub fn patch_consistency(
 
 /// Meshes a refined occupancy as the hull stage does, intersected with the hull's solid on
 /// the silhouette cones (`hull_on_cones`, the field the hull stage meshed,
-/// [`crate::stages::visual_hull::on_the_cones`]): where the cut kept the hull, its surface
+/// [`crate::recon::visual_hull::on_the_cones`]): where the cut kept the hull, its surface
 /// is the hull's, below the voxel size; where it carved, it lies between the kept and
 /// carved voxels; it never lies outside the hull.
 pub fn mesh(
@@ -577,7 +577,7 @@ pub fn mesh(
     hull_on_cones: &[f32],
     smoothing: usize,
 ) -> (Vec<f32>, TriMesh) {
-    use crate::stages::visual_hull::box_blur_3d;
+    use crate::recon::visual_hull::box_blur_3d;
     let mut sdf = box_blur_3d(
         grid,
         &crate::geometry::distance::signed_distance(grid, occupied),
@@ -587,9 +587,9 @@ pub fn mesh(
         .zip(hull_on_cones)
         .map(|(&cut, &hull)| cut.max(hull))
         .collect();
-    let mut m = crate::stages::visual_hull::mesh_sdf(grid, &field);
+    let mut m = crate::recon::visual_hull::mesh_sdf(grid, &field);
     crate::geometry::smooth::taubin(&mut m, smoothing);
-    crate::stages::visual_hull::with_occupancy_sign(&mut sdf, occupied);
+    crate::recon::visual_hull::with_occupancy_sign(&mut sdf, occupied);
     (sdf, m)
 }
 
