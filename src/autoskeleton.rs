@@ -138,8 +138,8 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
         ..Default::default()
     };
     crate::runner::run(&job.with_frames(vec![frame]), &opts)?;
-    let (ply, _) = crate::stages::hull_files(frame);
-    let surface = crate::geometry::ply::read_ply(&job.cache.stage_dir("graphcut").join(ply))?;
+    use crate::artifacts::reconstruction::{self, Surface};
+    let surface = reconstruction::read_mesh(&job.cache, Surface::Refined, frame)?;
     // Phantom pieces (floor blobs, cables) would distort the body's height and coverage.
     let body = surface.largest_piece();
     let outcome = match crate::skeleton::embed::embed_scored(template, &body, up) {
@@ -274,7 +274,9 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
             } else {
                 "any examined frame"
             },
-            job.cache.stage_dir("graphcut").display(),
+            job.cache
+                .stage_dir(crate::artifacts::reconstruction::Surface::Refined.stage())
+                .display(),
             reasons.join("\n  ")
         )));
     };

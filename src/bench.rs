@@ -1,6 +1,7 @@
 //! `pipeline bench`: timings of the stages' inner steps on real inputs, printed as a
 //! table (benchmarks live here, never in tests).
 
+use crate::artifacts::reconstruction::{self, Surface};
 use crate::error::Result;
 use crate::geometry::isosurface::{self, ScalarGrid};
 use crate::recon::visual_hull::{self, MaskCounts};
@@ -141,9 +142,8 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
     let cams = &job.sequence.cameras;
     let p = &job.config.graphcut;
     let t = Instant::now();
-    let (grid, sdf) = crate::stages::load_grid(&ctx, "visual_hull", frame)?;
-    let (ply, _) = crate::stages::hull_files(frame);
-    let hull = crate::geometry::ply::read_ply(&job.cache.stage_dir("visual_hull").join(ply))?;
+    let (grid, sdf) = reconstruction::read_grid(&job.cache, Surface::Hull, frame)?;
+    let hull = reconstruction::read_mesh(&job.cache, Surface::Hull, frame)?;
     use rayon::prelude::*;
     let frames: Vec<image::RgbImage> = (0..cams.len())
         .into_par_iter()
@@ -169,8 +169,9 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         &mut timings,
     );
     let t_refine = t.elapsed().as_secs_f64();
-    let (t_band, hull_on_cones) =
-        best_of(1, || crate::stages::load_hull_on_cones(&ctx, frame, &sdf));
+    let (t_band, hull_on_cones) = best_of(1, || {
+        reconstruction::read_hull_on_cones(&job.cache, frame, &sdf)
+    });
     let hull_on_cones = hull_on_cones?;
     let (t_mesh, _) = best_of(1, || {
         gc::mesh(&grid, &refined, &hull_on_cones, p.smoothing_iterations)
@@ -203,12 +204,10 @@ pub fn reliability(
 ) -> Result<String> {
     use crate::recon::reliability;
     use rayon::prelude::*;
-    let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
     let p = &job.config.reliability;
     let cams = &job.sequence.cameras;
-    let grid = crate::stages::load_grid_spec(&ctx, "graphcut", frame)?;
-    let (ply, _) = crate::stages::hull_files(frame);
-    let mesh = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("graphcut").join(ply))?;
+    let grid = reconstruction::read_grid_spec(&job.cache, Surface::Refined, frame)?;
+    let mesh = reconstruction::read_mesh(&job.cache, Surface::Refined, frame)?;
     let h = grid.voxel;
     let start = Instant::now();
     let frames: Vec<image::RgbImage> = (0..cams.len())
@@ -444,7 +443,7 @@ pub fn track(
     let bar = crate::runner::bar(frames.len(), params.method.name());
     let tracked = crate::stages::fit::track_in_memory(&ctx, &frames, &params, &|_| bar.inc(1))?;
     bar.finish_and_clear();
-    let model = crate::stages::model::load(&ctx)?;
+    let model = crate::artifacts::body_model::read(&job.cache)?;
     let rows: Vec<_> = tracked
         .results
         .iter()
@@ -568,7 +567,7 @@ pub fn rounds_csv(
 /// vertex counts and the time per round of each step.
 pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
     let ctx = job.context();
-    let model = crate::stages::model::load(&ctx)?;
+    let model = crate::artifacts::body_model::read(&job.cache)?;
     let mut params = job.config.fit.clone();
     if let Some(s) = spacing {
         params.sample_spacing = s;

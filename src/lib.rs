@@ -4,6 +4,7 @@
 //! The stages follow `method.md`: silhouettes, visual hull, graph-cut refinement, ZNCC
 //! reliability, skin-bone model, robust articulated fitting, and exports.
 
+pub mod artifacts;
 pub mod autoskeleton;
 pub mod bench;
 pub mod cache;

@@ -843,7 +843,7 @@ fn ablation(job: &Job) -> anyhow::Result<()> {
             hullpose::stages::fit::track_in_memory(&ctx, &tracked, &params, &|_| bar.inc(1))?
                 .results;
         bar.finish_and_clear();
-        let model = hullpose::stages::model::load(&ctx)?;
+        let model = hullpose::artifacts::body_model::read(&job.cache)?;
         let rows: Vec<_> = results
             .iter()
             .flat_map(|(f, r)| hullpose::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))

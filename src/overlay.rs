@@ -1,6 +1,7 @@
 //! Pictures of results for people: a reconstruction rendered through a capture camera
 //! beside the frame it explains.
 
+use crate::artifacts::reconstruction::Surface;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
@@ -212,8 +213,12 @@ pub fn hull_beside_frame(
     };
     let ctx = crate::stages::Context::new(&job.config, seq, &job.cache);
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
-    let (ply, _) = crate::stages::hull_files(frame);
-    let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;
+    let surface = if stage == "graphcut" {
+        Surface::Refined
+    } else {
+        Surface::Hull
+    };
+    let mesh = crate::artifacts::reconstruction::read_mesh(&job.cache, surface, frame)?;
     Ok(mesh_beside_frame(
         &seq.cameras[c],
         &seq.load_frame(c, frame)?,

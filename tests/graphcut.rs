@@ -34,8 +34,18 @@ fn mesh(dir: &Path, stage: &str, frame: u32) -> TriMesh {
 }
 
 fn grid(dir: &Path, stage: &str, frame: u32) -> (GridSpec, Vec<f32>) {
-    let path = dir.join(format!("cache/{stage}/{frame:06}.grid"));
-    hullpose::recon::visual_hull::parse_grid(&path, &std::fs::read(&path).unwrap()).unwrap()
+    use hullpose::artifacts::reconstruction::{read_grid, Surface};
+    let surface = if stage == "graphcut" {
+        Surface::Refined
+    } else {
+        Surface::Hull
+    };
+    read_grid(
+        &hullpose::cache::Cache::new(dir.join("cache")),
+        surface,
+        frame,
+    )
+    .unwrap()
 }
 
 /// Over true-surface samples seen by at least two cameras where the hull lies more than two
@@ -198,8 +208,18 @@ fn coverage_and_accuracy(made: &Made, seq: &str, extra: &str) -> (Vec<(f64, f64)
     let rows = evaluate(dir.path(), "0..0");
     let config = hullpose::config::Config::load(&dir.path().join("pipeline.yaml")).unwrap();
     let job = hullpose::runner::Job::load(config, None).unwrap();
-    let hull = hullpose::eval::reprojection_agreement(&job, "visual_hull", 0).unwrap();
-    let cut = hullpose::eval::reprojection_agreement(&job, "graphcut", 0).unwrap();
+    let hull = hullpose::eval::reprojection_agreement(
+        &job,
+        hullpose::artifacts::reconstruction::Surface::Hull,
+        0,
+    )
+    .unwrap();
+    let cut = hullpose::eval::reprojection_agreement(
+        &job,
+        hullpose::artifacts::reconstruction::Surface::Refined,
+        0,
+    )
+    .unwrap();
     let acc = |stage: &str| rows.iter().find(|r| r.stage == stage).unwrap().accuracy;
     (
         hull.iter()

@@ -21,7 +21,7 @@ fn proposed_fit_tracks_the_humanoid_within_one_and_a_half_centimetres() {
     let config = hullpose::config::Config::load(&d.join("pipeline.yaml")).unwrap();
     let job = hullpose::runner::Job::load(config, None).unwrap();
     let ctx = job.context();
-    let model = hullpose::stages::model::load(&ctx).unwrap();
+    let model = hullpose::artifacts::body_model::read(ctx.cache).unwrap();
     let truth_path = d.join("data/humanoid/ground_truth/joints.csv");
     let truth = hullpose::joints::read(&truth_path).unwrap();
     let errors_cm = |rows: &[hullpose::joints::JointRow]| -> Vec<f64> {

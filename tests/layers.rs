@@ -25,6 +25,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("joints", 0),
     ("poses", 0),
     ("dataset", 1),
+    ("artifacts", 1),
     ("config", 1),
     ("cache", 1),
     ("stages", 1),

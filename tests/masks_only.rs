@@ -43,9 +43,8 @@ fn a_masks_only_humanoid_is_tracked_within_two_and_a_half_centimetres() {
     assert!(!hull.vertices.is_empty());
     assert_eq!(hull.vertices, refined.vertices);
     assert_eq!(hull.triangles, refined.triangles);
-    let path = d.join("cache/reliability/000003.obs");
-    let obs = hullpose::recon::reliability::Observed::parse(&path, &std::fs::read(&path).unwrap())
-        .unwrap();
+    let cache = hullpose::cache::Cache::new(d.join("cache"));
+    let obs = hullpose::artifacts::observation::read(&cache, 3).unwrap();
     assert!(!obs.rho_p.is_empty() && obs.rho_p.iter().all(|&r| r == 1.0));
 
     let errors = output_joint_errors_cm(d, "humanoid");

@@ -11,8 +11,7 @@ use nalgebra::Vector3;
 use std::path::Path;
 
 fn load_model(dir: &Path) -> BodyModel {
-    let path = dir.join("cache/model/model.hpm");
-    BodyModel::parse(&path, &std::fs::read(&path).unwrap()).unwrap()
+    hullpose::artifacts::body_model::read(&hullpose::cache::Cache::new(dir.join("cache"))).unwrap()
 }
 
 /// Per frame, the mean distance (metres) from the model posed with the frame's true pose

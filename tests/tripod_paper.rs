@@ -5,7 +5,6 @@
 mod common;
 
 use common::*;
-use hullpose::recon::reliability::Observed;
 use hullpose::synth::{SceneKind, SynthOptions};
 use std::sync::OnceLock;
 
@@ -80,8 +79,8 @@ fn zncc_separates_true_from_false_surface() {
     for prop in ["quality", "zncc", "rho_p", "cameras", "red"] {
         assert!(header.contains(&format!(" {prop}\n")), "{prop} in {header}");
     }
-    let path = d.join("cache/reliability/000008.obs");
-    let obs = Observed::parse(&path, &std::fs::read(&path).unwrap()).unwrap();
+    let cache = hullpose::cache::Cache::new(d.join("cache"));
+    let obs = hullpose::artifacts::observation::read(&cache, 8).unwrap();
     let mesh = hullpose::geometry::ply::read_ply(&d.join("cache/graphcut/000008.ply")).unwrap();
     assert_eq!(obs.vertices.len(), mesh.vertices.len());
     assert!(obs.zncc.iter().all(|z| (-1.0..=1.0).contains(z)));
@@ -107,7 +106,7 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     let job = hullpose::runner::Job::load(config, None).unwrap();
     let ctx = job.context();
     let tracked = job.tracked_frames().unwrap();
-    let model = hullpose::stages::model::load(&ctx).unwrap();
+    let model = hullpose::artifacts::body_model::read(ctx.cache).unwrap();
     // Tracked from t0 up to frame `last` (rho_p is only needed up to the contact frames).
     let baseline = |params: hullpose::fit::FitParams, last: u32| {
         let frames: Vec<u32> = tracked.iter().copied().filter(|&f| f <= last).collect();

@@ -12,6 +12,7 @@
 //!   reconstructed solid or within one voxel of it (from the stage's cached signed
 //!   distance), which a reconstruction too fat by any amount passes.
 
+use crate::artifacts::reconstruction::{self, Surface};
 use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
 use crate::geometry::spatial::PointIndex;
@@ -161,7 +162,7 @@ pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TruthSamples
 }
 
 /// Reconstruction stages the evaluation knows: (stage, mesh file, grid file) per frame.
-const RECON_STAGES: &[&str] = &["visual_hull", "graphcut"];
+const RECON_STAGES: [Surface; 2] = [Surface::Hull, Surface::Refined];
 
 /// Evaluates every cached reconstruction of the job's frames against the true meshes.
 pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
@@ -174,16 +175,13 @@ pub fn reconstruction(job: &Job) -> Result<Vec<ReconRow>> {
         any_truth = true;
         // Sampled once per frame (when a stage is cached), scored against every stage.
         let mut index = None;
-        for &stage in RECON_STAGES {
+        for surface in RECON_STAGES {
+            let stage = surface.stage();
             if job.cache.manifest(stage, frame).is_none() {
                 continue;
             }
-            let dir = job.cache.stage_dir(stage);
-            let (ply, grid_file) = crate::stages::hull_files(frame);
-            let mesh = crate::geometry::ply::read_ply(&dir.join(&ply))?;
-            let path = dir.join(&grid_file);
-            let data = crate::limits::read_cache_file(&path)?;
-            let (grid, sdf) = crate::recon::visual_hull::parse_grid(&path, &data)?;
+            let mesh = reconstruction::read_mesh(&job.cache, surface, frame)?;
+            let (grid, sdf) = reconstruction::read_grid(&job.cache, surface, frame)?;
             let score = score(
                 &mesh,
                 &grid,
@@ -230,11 +228,10 @@ pub struct SilhouetteAgreement {
 /// Silhouette agreement per camera of a reconstruction stage's mesh for one frame.
 pub fn reprojection_agreement(
     job: &Job,
-    stage: &str,
+    surface: Surface,
     frame: u32,
 ) -> Result<Vec<SilhouetteAgreement>> {
-    let (ply, _) = crate::stages::hull_files(frame);
-    let mesh = crate::geometry::ply::read_ply(&job.cache.stage_dir(stage).join(ply))?;
+    let mesh = reconstruction::read_mesh(&job.cache, surface, frame)?;
     coverage_of(job, &pixel_tables(job), &mesh, frame)
 }
 
@@ -262,16 +259,13 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
             .map(|c| job.sequence.load_frame(c, f))
             .collect::<Result<_>>()?;
         let images = crate::photo::grey(&frames);
-        for &stage in RECON_STAGES {
+        for surface in RECON_STAGES {
+            let stage = surface.stage();
             if job.cache.manifest(stage, f).is_none() {
                 continue;
             }
-            let (ply, grid_file) = crate::stages::hull_files(f);
-            let dir = job.cache.stage_dir(stage);
-            let mesh = crate::geometry::ply::read_ply(&dir.join(ply))?;
-            let path = dir.join(grid_file);
-            let data = crate::limits::read_cache_file(&path)?;
-            let (grid, _) = crate::recon::visual_hull::parse_grid(&path, &data)?;
+            let mesh = reconstruction::read_mesh(&job.cache, surface, f)?;
+            let grid = reconstruction::read_grid_spec(&job.cache, surface, f)?;
             let (zncc, seen) = graphcut::mean_vertex_consistency(
                 &job.sequence.cameras,
                 &images,

@@ -78,9 +78,9 @@ pub fn evaluate(job: &Job) -> Result<Vec<ReliabilityRow>> {
         let Some(truth) = job.sequence.ground_truth_mesh(frame)? else {
             continue;
         };
-        let ctx = crate::stages::Context::new(&job.config, &job.sequence, &job.cache);
-        let obs = crate::stages::load_observed(&ctx, frame)?;
-        let grid = crate::stages::load_grid_spec(&ctx, "graphcut", frame)?;
+        use crate::artifacts::reconstruction::{self, Surface};
+        let obs = crate::artifacts::observation::read(&job.cache, frame)?;
+        let grid = reconstruction::read_grid_spec(&job.cache, Surface::Refined, frame)?;
         let h = grid.voxel;
         let truth = super::TruthSamples::new(&truth);
         let distance: Vec<f64> = obs

@@ -8,14 +8,15 @@
 //! (refined surface, with raw `zncc`, `rho_p` and `cameras` beside it when the reliability
 //! is cached) and the part index (fit, model).
 
+use crate::artifacts::reconstruction::{self, Surface};
 use crate::camera::Camera;
 use crate::config::Format;
 use crate::error::Result;
 use crate::geometry::obj::write_obj;
-use crate::geometry::ply::{read_ply, write_ply, PlyFormat, VertexAttributes};
+use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
 use crate::geometry::TriMesh;
 use crate::skeleton::model::BodyModel;
-use crate::stages::{hull_files, Context};
+use crate::stages::Context;
 use image::RgbImage;
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -132,7 +133,7 @@ impl<'a> MeshExport<'a> {
     ) -> Result<(MeshExport<'a>, usize)> {
         let tolerance = ctx.config.reliability.depth_tolerance * ctx.config.visual_hull.voxel_size;
         let model = if has_skeleton {
-            Some(crate::stages::model::load(ctx)?)
+            Some(crate::artifacts::body_model::read(ctx.cache)?)
         } else {
             None
         };
@@ -171,8 +172,7 @@ impl<'a> MeshExport<'a> {
         let cams = &ctx.sequence.cameras;
         let mut files = 0;
         let stem = crate::dataset::frame_stem(frame);
-        let (ply, _) = hull_files(frame);
-        let hull = read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
+        let hull = reconstruction::read_mesh(ctx.cache, Surface::Hull, frame)?;
         let normals = hull.vertex_normals();
         let (colours, seen) = image_colours(cams, images, &hull, &normals, tolerance);
         files += write_one(
@@ -183,10 +183,10 @@ impl<'a> MeshExport<'a> {
             &colours,
             vec![("quality", &seen)],
         )?;
-        let refined = read_ply(&ctx.cache.stage_dir("graphcut").join(&ply))?;
+        let refined = reconstruction::read_mesh(ctx.cache, Surface::Refined, frame)?;
         let normals = refined.vertex_normals();
         let (colours, seen) = image_colours(cams, images, &refined, &normals, tolerance);
-        let observed = crate::stages::load_observed(ctx, frame)
+        let observed = crate::artifacts::observation::read(ctx.cache, frame)
             .ok()
             .filter(|o| o.vertices.len() == refined.vertices.len());
         let scalars: Vec<(&str, &[f32])> = match &observed {
@@ -207,7 +207,7 @@ impl<'a> MeshExport<'a> {
             scalars,
         )?;
         if let Some(m) = &self.model {
-            let pose = crate::stages::fit::cached_pose(ctx, &m.skeleton, frame)?;
+            let pose = crate::artifacts::fitted::read_pose(ctx.cache, &m.skeleton, frame)?;
             let posed = m.pose(&pose);
             files += write_one(
                 formats,

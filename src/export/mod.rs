@@ -29,12 +29,17 @@ pub fn folder(job_output: &std::path::Path) -> PathBuf {
 /// The fitted motion of the selected frames, from the fit's cache: the model and
 /// (frame, pose) in frame order.
 pub fn load_motion(ctx: &Context, frames: &[u32]) -> Result<(BodyModel, Vec<(u32, Pose)>)> {
-    let model = crate::stages::model::load(ctx)?;
+    let model = crate::artifacts::body_model::read(ctx.cache)?;
     let mut frames = frames.to_vec();
     frames.sort_unstable();
     let poses = frames
         .iter()
-        .map(|&f| Ok((f, crate::stages::fit::cached_pose(ctx, &model.skeleton, f)?)))
+        .map(|&f| {
+            Ok((
+                f,
+                crate::artifacts::fitted::read_pose(ctx.cache, &model.skeleton, f)?,
+            ))
+        })
         .collect::<Result<Vec<_>>>()?;
     Ok((model, poses))
 }

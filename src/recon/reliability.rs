@@ -19,13 +19,11 @@
 //! product.
 
 use crate::camera::Camera;
-use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
 use crate::photo::{depth_maps, mean_pair_zncc, GreyImage, Visibility};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::path::Path;
 
 /// Parameters of the reliability stage (pipeline.yaml key `reliability`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -132,57 +130,7 @@ pub struct Observed {
     pub cameras: Vec<u8>,
 }
 
-/// Magic bytes of the compact observation file.
-const OBS_MAGIC: &[u8; 8] = b"HPOBS001";
-
 impl Observed {
-    /// The compact little-endian form: magic, vertex count (u64), then per vertex
-    /// x y z nx ny nz zncc rho_p (f32) and the camera count (u8).
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let n = self.vertices.len();
-        let mut out = Vec::with_capacity(16 + 33 * n);
-        out.extend_from_slice(OBS_MAGIC);
-        out.extend_from_slice(&(n as u64).to_le_bytes());
-        for i in 0..n {
-            let v = &self.vertices[i];
-            let m = &self.normals[i];
-            for x in [v.x, v.y, v.z, m.x, m.y, m.z, self.zncc[i], self.rho_p[i]] {
-                out.extend_from_slice(&x.to_le_bytes());
-            }
-            out.push(self.cameras[i]);
-        }
-        out
-    }
-
-    /// Reads what [`Observed::to_bytes`] wrote; `path` names the file in errors.
-    pub fn parse(path: &Path, data: &[u8]) -> Result<Observed> {
-        let bad = || Error::invalid(path, "not a hullpose observation file (or truncated)");
-        if data.len() < 16 || &data[..8] != OBS_MAGIC {
-            return Err(bad());
-        }
-        let n = u64::from_le_bytes(data[8..16].try_into().unwrap());
-        if n.checked_mul(33).and_then(|b| b.checked_add(16)) != Some(data.len() as u64) {
-            return Err(bad());
-        }
-        let n = n as usize;
-        let mut o = Observed {
-            vertices: Vec::with_capacity(n),
-            normals: Vec::with_capacity(n),
-            zncc: Vec::with_capacity(n),
-            rho_p: Vec::with_capacity(n),
-            cameras: Vec::with_capacity(n),
-        };
-        for rec in data[16..].chunks_exact(33) {
-            let f = |k: usize| f32::from_le_bytes(rec[4 * k..4 * k + 4].try_into().unwrap());
-            o.vertices.push(Vector3::new(f(0), f(1), f(2)));
-            o.normals.push(Vector3::new(f(3), f(4), f(5)));
-            o.zncc.push(f(6));
-            o.rho_p.push(f(7));
-            o.cameras.push(rec[32]);
-        }
-        Ok(o)
-    }
-
     /// `mesh` as an observed surface without photo-consistency (a masks-only capture):
     /// rho_p 1 on every vertex, ZNCC 0 and no camera counted.
     pub fn unweighted(mesh: &TriMesh) -> Observed {

@@ -19,7 +19,6 @@
 //! ([`ConeBand`]) are kept for the graph-cut stage.
 
 use crate::camera::Camera;
-use crate::error::{Error, Result};
 use crate::geometry::cone_distance::ConeDistance;
 use crate::geometry::distance::signed_distance;
 use crate::geometry::grid::GridSpec;
@@ -725,10 +724,6 @@ pub struct ConeBand {
     pub changed: Vec<(u32, f32)>,
 }
 
-/// Magic bytes of the band file: then the entry count (u64) and per entry the voxel index
-/// (u32) and the value (f32), little-endian.
-const BAND_MAGIC: &[u8; 8] = b"HPBAND01";
-
 impl ConeBand {
     /// The voxels where `field` differs from `base`.
     pub fn between(base: &[f32], field: &[f32]) -> ConeBand {
@@ -748,91 +743,4 @@ impl ConeBand {
         }
         out
     }
-
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(16 + 8 * self.changed.len());
-        out.extend_from_slice(BAND_MAGIC);
-        out.extend_from_slice(&(self.changed.len() as u64).to_le_bytes());
-        for &(i, v) in &self.changed {
-            out.extend_from_slice(&i.to_le_bytes());
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-        out
-    }
-
-    /// Reads what [`ConeBand::to_bytes`] wrote, for a grid of `voxels` voxels; `path` names
-    /// the file in errors.
-    pub fn parse(path: &std::path::Path, data: &[u8], voxels: usize) -> Result<ConeBand> {
-        let bad = |what: &str| Error::invalid(path, format!("not a hullpose band file: {what}"));
-        if data.len() < 16 || &data[..8] != BAND_MAGIC {
-            return Err(bad("no header (or truncated)"));
-        }
-        let n = u64::from_le_bytes(data[8..16].try_into().unwrap());
-        if n.checked_mul(8).and_then(|b| b.checked_add(16)) != Some(data.len() as u64) {
-            return Err(bad("its length does not match its entry count"));
-        }
-        let mut changed = Vec::with_capacity(n as usize);
-        for rec in data[16..].chunks_exact(8) {
-            let i = u32::from_le_bytes(rec[..4].try_into().unwrap());
-            let v = f32::from_le_bytes(rec[4..].try_into().unwrap());
-            if i as usize >= voxels || !v.is_finite() {
-                return Err(bad("an entry outside the grid or not finite"));
-            }
-            changed.push((i, v));
-        }
-        Ok(ConeBand { changed })
-    }
-}
-
-/// Binary grid file: magic, dims, origin, voxel size, then the signed distance per voxel.
-const GRID_MAGIC: &[u8; 8] = b"HPGRID01";
-
-/// Serializes a grid and its signed distance (little-endian).
-pub fn grid_bytes(grid: &GridSpec, sdf: &[f32]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(64 + 4 * sdf.len());
-    out.extend_from_slice(GRID_MAGIC);
-    for d in grid.dims {
-        out.extend_from_slice(&(d as u64).to_le_bytes());
-    }
-    for v in [grid.origin.x, grid.origin.y, grid.origin.z, grid.voxel] {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    for v in sdf {
-        out.extend_from_slice(&v.to_le_bytes());
-    }
-    out
-}
-
-/// The grid of a [`grid_bytes`] file from its first 64 bytes, checked against the file's
-/// length `len` in bytes.
-pub fn parse_grid_header(path: &std::path::Path, header: &[u8], len: u64) -> Result<GridSpec> {
-    let bad = || Error::invalid(path, "not a hullpose grid file (or truncated)");
-    if header.len() < 64 || &header[..8] != GRID_MAGIC {
-        return Err(bad());
-    }
-    let u = |o: usize| u64::from_le_bytes(header[o..o + 8].try_into().unwrap()) as usize;
-    let f = |o: usize| f64::from_le_bytes(header[o..o + 8].try_into().unwrap());
-    let dims = [u(8), u(16), u(24)];
-    let n = dims
-        .iter()
-        .try_fold(1usize, |a, &d| a.checked_mul(d))
-        .ok_or_else(bad)?;
-    if (len as u128) != 64 + 4 * n as u128 {
-        return Err(bad());
-    }
-    Ok(GridSpec {
-        dims,
-        origin: Vector3::new(f(32), f(40), f(48)),
-        voxel: f(56),
-    })
-}
-
-/// Reads what [`grid_bytes`] wrote.
-pub fn parse_grid(path: &std::path::Path, data: &[u8]) -> Result<(GridSpec, Vec<f32>)> {
-    let grid = parse_grid_header(path, data, data.len() as u64)?;
-    let sdf = data[64..]
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-        .collect();
-    Ok((grid, sdf))
 }

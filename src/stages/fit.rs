@@ -6,10 +6,9 @@
 //! After the stage, the output folder gets the whole run's `joints.csv`, `poses.csv` and
 //! `fit.csv`.
 
-use super::fit_state::FitState;
-use super::{load_observed, Context, Output};
+use super::{Context, Output};
+use crate::artifacts::fitted::{self, files, FitState};
 use crate::cache::KeyBuilder;
-use crate::dataset::frame_stem;
 use crate::error::{Error, Result};
 use crate::fit::{
     FitDiagnostics, FitResult, FitStatus, Fitter, Neighbours, Observation, Probe, Tracker,
@@ -32,18 +31,6 @@ pub const DIAGNOSTICS_HEADER: &str =
 /// `+`; empty when none).
 pub const HEALTH_HEADER: &str =
     "iou_worst,iou_worst_camera,iou_median,joint_motion_m,unexplained_cm2,recovery,flags";
-
-/// The per-frame file names: (pose, joints, diagnostics, mesh, state between frames).
-pub fn files(frame: u32) -> [String; 5] {
-    let s = frame_stem(frame);
-    [
-        format!("{s}.pose.csv"),
-        format!("{s}.joints.csv"),
-        format!("{s}.fit.csv"),
-        format!("{s}.ply"),
-        format!("{s}.state.json"),
-    ]
-}
 
 pub(super) fn sources(_ctx: &Context, _frame: u32, _key: &mut KeyBuilder) -> Result<()> {
     Ok(())
@@ -81,23 +68,12 @@ pub fn joint_rows(skeleton: &Skeleton, frame: u32, pose: &Pose) -> Vec<JointRow>
 
 /// A frame's observed surface as the fit reads it.
 pub fn observation(ctx: &Context, frame: u32) -> Result<Observation> {
-    let o = load_observed(ctx, frame)?;
+    let o = crate::artifacts::observation::read(ctx.cache, frame)?;
     Ok(Observation {
         vertices: o.vertices.iter().map(|v| v.cast()).collect(),
         normals: o.normals.iter().map(|v| v.cast()).collect(),
         rho_p: o.rho_p.iter().map(|&v| v as f64).collect(),
     })
-}
-
-/// Reads a cached frame's state (its pose and diagnostics at full precision).
-pub fn cached_state(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<FitState> {
-    let path = ctx.cache.stage_dir("fit").join(&files(frame)[4]);
-    super::fit_state::read(&path, frame, skeleton.bones.len())
-}
-
-/// Reads a cached frame's pose.
-pub fn cached_pose(ctx: &Context, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
-    Ok(cached_state(ctx, skeleton, frame)?.pose)
 }
 
 /// Tracks `frames` (in computation order, as [`crate::runner::Job::tracked_frames`] gives
@@ -136,7 +112,7 @@ pub fn track(
             let before = seq.tracked_previous(previous, t0);
             for f in std::iter::once(previous).chain(before) {
                 if !tracker.knows(f) {
-                    let state = cached_state(ctx, &model.skeleton, f)?;
+                    let state = fitted::read_state(ctx.cache, &model.skeleton, f)?;
                     tracker.know(f, state.pose, state.diagnostics);
                 }
             }
@@ -158,7 +134,7 @@ pub fn track_in_memory(
     params: &crate::fit::FitParams,
     progress: &dyn Fn(u32),
 ) -> Result<Tracked> {
-    let model = super::model::load(ctx)?;
+    let model = crate::artifacts::body_model::read(ctx.cache)?;
     let probe = Probe::default();
     let mut out = Vec::with_capacity(frames.len());
     let mut seconds = Vec::with_capacity(frames.len());
@@ -208,7 +184,7 @@ pub(super) fn compute(
     frames: &[u32],
     commit: &mut dyn FnMut(u32, Output, f64) -> Result<()>,
 ) -> Result<()> {
-    let model = super::model::load(ctx)?;
+    let model = crate::artifacts::body_model::read(ctx.cache)?;
     let probe = Probe::default();
     let checks = HealthChecks {
         coarse: crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL),
@@ -238,7 +214,7 @@ pub(super) fn compute(
                 };
                 let state = match states.get(&p) {
                     Some(s) => s.clone(),
-                    None => cached_state(ctx, &model.skeleton, p)?,
+                    None => fitted::read_state(ctx.cache, &model.skeleton, p)?,
                 };
                 previous.push(state);
                 at = p;
@@ -260,7 +236,7 @@ pub(super) fn compute(
             } else {
                 Some(match states.get(&t0) {
                     Some(s) => s.iou_worst,
-                    None => cached_state(ctx, &model.skeleton, t0)?.iou_worst,
+                    None => fitted::read_state(ctx.cache, &model.skeleton, t0)?.iou_worst,
                 })
             };
             let (out, state) = write_frame(
@@ -314,7 +290,7 @@ fn write_frame(
     result: &FitResult,
 ) -> Result<(Output, FitState)> {
     use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
-    let dir = ctx.cache.stage_dir("fit");
+    let dir = ctx.cache.stage_dir(fitted::STAGE);
     let names = files(frame);
     let skeleton = &model.skeleton;
     crate::poses::write(
@@ -397,7 +373,7 @@ fn write_frame(
         iou_worst: health.iou_worst,
     };
     // Written last: a frame whose state exists has every other file.
-    super::fit_state::write(&dir.join(&names[4]), frame, &state)?;
+    fitted::write_state(&dir.join(&names[4]), frame, &state)?;
     Ok((
         Output {
             files: names.to_vec(),
@@ -429,7 +405,7 @@ fn frame_health(
 pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
     let mut frames = frames.to_vec();
     frames.sort_unstable();
-    let dir = ctx.cache.stage_dir("fit");
+    let dir = ctx.cache.stage_dir(fitted::STAGE);
     let out = &ctx.config.output;
     let mut joints = String::new();
     let mut poses = String::new();

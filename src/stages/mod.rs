@@ -5,12 +5,12 @@
 //! [`StageDef`] adapters here do the file handling around them.
 
 pub mod fit;
-pub mod fit_state;
 pub mod model;
 
+use crate::artifacts::{self, reconstruction, reconstruction::Surface};
 use crate::cache::{Cache, KeyBuilder};
 use crate::config::Config;
-use crate::dataset::{frame_stem, Sequence};
+use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
@@ -281,8 +281,7 @@ fn silhouette_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result
 fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let seq = ctx.sequence;
     let method = resolve_method(ctx)?;
-    let dir = ctx.cache.stage_dir("silhouette");
-    let mut files = Vec::new();
+    let mut masks = Vec::with_capacity(seq.cameras.len());
     for c in 0..seq.cameras.len() {
         let mask = match method {
             SilhouetteMethod::Masks => {
@@ -303,12 +302,11 @@ fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Output> {
                 silhouette::subtract_background(&img, &bg, &ctx.config.silhouette)
             }
         };
-        let rel = format!("{}/{}.png", frame_stem(frame), seq.cameras[c].name);
-        crate::imageio::write_gray(&dir.join(&rel), &mask)?;
-        files.push(rel);
+        masks.push(mask);
     }
+    let dir = ctx.cache.stage_dir(artifacts::silhouettes::STAGE);
     Ok(Output {
-        files,
+        files: artifacts::silhouettes::write(&dir, frame, &seq.cameras, &masks)?,
         warnings: Vec::new(),
     })
 }
@@ -316,30 +314,6 @@ fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Output> {
 fn visual_hull_sources(ctx: &Context, _frame: u32, key: &mut KeyBuilder) -> Result<()> {
     key.add_file(&ctx.config.calibration)?;
     Ok(())
-}
-
-/// Paths of a reconstruction stage's artifacts of a frame (mesh, grid), relative to its
-/// stage folder.
-pub fn hull_files(frame: u32) -> (String, String) {
-    let stem = frame_stem(frame);
-    (format!("{stem}.ply"), format!("{stem}.grid"))
-}
-
-/// Path of the hull stage's band file of a frame ([`visual_hull::ConeBand`]), relative to
-/// its stage folder.
-pub fn hull_band_file(frame: u32) -> String {
-    format!("{}.band", frame_stem(frame))
-}
-
-/// Reads the hull's solid on the cones of a frame: its stored signed distance `sdf` with
-/// the band file's values.
-pub fn load_hull_on_cones(ctx: &Context, frame: u32, sdf: &[f32]) -> Result<Vec<f32>> {
-    let path = ctx
-        .cache
-        .stage_dir("visual_hull")
-        .join(hull_band_file(frame));
-    let data = crate::limits::read_cache_file(&path)?;
-    Ok(visual_hull::ConeBand::parse(&path, &data, sdf.len())?.applied_to(sdf))
 }
 
 fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
@@ -352,61 +326,34 @@ fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let hull = visual_hull::reconstruct(&ctx.sequence.cameras, &masks, p).map_err(|m| {
         Error::invalid(&ctx.config.path, format!("visual_hull, frame {frame}: {m}"))
     })?;
-    let dir = ctx.cache.stage_dir("visual_hull");
-    let (mesh, grid_data, band) = match &hull {
-        Some(h) => (
-            h.mesh.clone(),
-            visual_hull::grid_bytes(&h.grid, &h.sdf),
-            h.on_cones.clone(),
-        ),
+    let dir = ctx.cache.stage_dir(Surface::Hull.stage());
+    let mut files = match &hull {
+        Some(h) => {
+            let mut files = reconstruction::write(&dir, frame, &h.mesh, &h.grid, &h.sdf)?;
+            files.push(reconstruction::write_band(&dir, frame, &h.on_cones)?);
+            files
+        }
         None => {
             warnings.push(format!(
                 "frame {frame}: the hull is empty: {}",
                 coverage.why_empty()
             ));
-            (
-                TriMesh::default(),
-                visual_hull::grid_bytes(
-                    &GridSpec {
-                        origin: nalgebra::Vector3::zeros(),
-                        voxel: p.voxel_size,
-                        dims: [0, 0, 0],
-                    },
-                    &[],
-                ),
-                Default::default(),
-            )
+            let grid = GridSpec {
+                origin: nalgebra::Vector3::zeros(),
+                voxel: p.voxel_size,
+                dims: [0, 0, 0],
+            };
+            let mut files = reconstruction::write(&dir, frame, &TriMesh::default(), &grid, &[])?;
+            files.push(reconstruction::write_band(
+                &dir,
+                frame,
+                &Default::default(),
+            )?);
+            files
         }
     };
-    let mut out = write_reconstruction(&dir, frame, &mesh, &grid_data, warnings)?;
-    let band_file = hull_band_file(frame);
-    crate::fsutil::write_atomic(&dir.join(&band_file), &band.to_bytes())?;
-    out.files.push(band_file);
-    Ok(out)
-}
-
-/// Writes a reconstruction stage's artifacts of a frame: the mesh (binary PLY with normals)
-/// and the serialized grid.
-fn write_reconstruction(
-    dir: &std::path::Path,
-    frame: u32,
-    mesh: &TriMesh,
-    grid_data: &[u8],
-    warnings: Vec<String>,
-) -> Result<Output> {
-    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
-    let (ply, grid) = hull_files(frame);
-    let normals = mesh.vertex_normals();
-    let attrs = VertexAttributes {
-        normals: Some(&normals),
-        ..Default::default()
-    };
-    write_ply(&dir.join(&ply), mesh, &attrs, PlyFormat::BinaryLittleEndian)?;
-    crate::fsutil::write_atomic(&dir.join(&grid), grid_data)?;
-    Ok(Output {
-        files: vec![ply, grid],
-        warnings,
-    })
+    files.sort();
+    Ok(Output { files, warnings })
 }
 
 /// Why `frame`'s hull is empty, from its silhouettes (for the model's and the skeleton's
@@ -420,17 +367,7 @@ pub fn why_hull_is_empty(ctx: &Context, frame: u32) -> String {
 
 /// Loads the silhouettes of a frame from the cache (for downstream stages and tests).
 pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImage>> {
-    let dir = ctx.cache.stage_dir("silhouette");
-    ctx.sequence
-        .cameras
-        .iter()
-        .map(|cam| {
-            let path = dir
-                .join(frame_stem(frame))
-                .join(format!("{}.png", cam.name));
-            Ok(crate::dataset::decode(&path, None)?.into_luma8())
-        })
-        .collect()
+    artifacts::silhouettes::read(ctx.cache, frame, &ctx.sequence.cameras)
 }
 
 fn graphcut_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result<()> {
@@ -507,30 +444,6 @@ pub fn plan_notes(ctx: &Context) -> Result<Vec<String>> {
     ])
 }
 
-/// Reads a reconstruction stage's cached grid of a frame from its header only (no signed
-/// distance).
-pub fn load_grid_spec(ctx: &Context, stage: &str, frame: u32) -> Result<GridSpec> {
-    use std::io::Read;
-    let (_, grid) = hull_files(frame);
-    let path = ctx.cache.stage_dir(stage).join(grid);
-    let mut file = crate::limits::open_regular(&path)?;
-    let len = file.metadata().map_err(|e| Error::io(&path, e))?.len();
-    let mut header = Vec::with_capacity(64);
-    (&mut file)
-        .take(64)
-        .read_to_end(&mut header)
-        .map_err(|e| Error::io(&path, e))?;
-    visual_hull::parse_grid_header(&path, &header, len)
-}
-
-/// Reads a reconstruction stage's cached grid and signed distance.
-pub fn load_grid(ctx: &Context, stage: &str, frame: u32) -> Result<(GridSpec, Vec<f32>)> {
-    let (_, grid) = hull_files(frame);
-    let path = ctx.cache.stage_dir(stage).join(grid);
-    let data = crate::limits::read_cache_file(&path)?;
-    visual_hull::parse_grid(&path, &data)
-}
-
 /// The frame's images as grey: decoded, or kept from an earlier stage of the frame
 /// ([`Context::sharing_frame_images`]).
 fn grey_frames(ctx: &Context, frame: u32) -> Result<Arc<Vec<GreyImage>>> {
@@ -555,29 +468,10 @@ fn grey_frames(ctx: &Context, frame: u32) -> Result<Arc<Vec<GreyImage>>> {
     Ok(grey)
 }
 
-/// Paths of the reliability stage's artifacts of a frame (coloured PLY, compact
-/// observation), relative to its stage folder.
-pub fn reliability_files(frame: u32) -> (String, String) {
-    let stem = frame_stem(frame);
-    (format!("{stem}.ply"), format!("{stem}.obs"))
-}
-
-/// Reads a frame's observed surface with its reliability.
-pub fn load_observed(ctx: &Context, frame: u32) -> Result<reliability::Observed> {
-    let path = ctx
-        .cache
-        .stage_dir("reliability")
-        .join(reliability_files(frame).1);
-    let data = crate::limits::read_cache_file(&path)?;
-    reliability::Observed::parse(&path, &data)
-}
-
 fn reliability_compute(ctx: &Context, frame: u32) -> Result<Output> {
-    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let p = &ctx.config.reliability;
-    let grid = load_grid_spec(ctx, "graphcut", frame)?;
-    let (ply, _) = hull_files(frame);
-    let mesh = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("graphcut").join(&ply))?;
+    let grid = reconstruction::read_grid_spec(ctx.cache, Surface::Refined, frame)?;
+    let mesh = reconstruction::read_mesh(ctx.cache, Surface::Refined, frame)?;
     let mut warnings = Vec::new();
     let observed = if mesh.vertices.is_empty() {
         warnings.push(format!("frame {frame}: the refined surface is empty"));
@@ -589,55 +483,33 @@ fn reliability_compute(ctx: &Context, frame: u32) -> Result<Output> {
         let images = grey_frames(ctx, frame)?;
         reliability::observe(&ctx.sequence.cameras, &images, &mesh, grid.voxel, p)
     };
-    let (ply, obs) = reliability_files(frame);
-    let dir = ctx.cache.stage_dir("reliability");
-    let normals: Vec<nalgebra::Vector3<f64>> = observed.normals.iter().map(|n| n.cast()).collect();
-    let colours = observed.colours(p);
-    let cameras: Vec<f32> = observed.cameras.iter().map(|&c| c as f32).collect();
-    let attrs = VertexAttributes {
-        normals: Some(&normals),
-        colors: Some(&colours),
-        scalars: vec![
-            ("quality", &observed.zncc),
-            ("zncc", &observed.zncc),
-            ("rho_p", &observed.rho_p),
-            ("cameras", &cameras),
-        ],
-    };
-    write_ply(
-        &dir.join(&ply),
-        &mesh,
-        &attrs,
-        PlyFormat::BinaryLittleEndian,
-    )?;
-    crate::fsutil::write_atomic(&dir.join(&obs), &observed.to_bytes())?;
-    Ok(Output {
-        files: vec![ply, obs],
-        warnings,
-    })
+    let dir = ctx.cache.stage_dir(artifacts::observation::STAGE);
+    let files = artifacts::observation::write(&dir, frame, &mesh, &observed, p)?;
+    Ok(Output { files, warnings })
 }
 
 fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
     let p = &ctx.config.graphcut;
-    let (grid, sdf) = load_grid(ctx, "visual_hull", frame)?;
-    let (ply, _) = hull_files(frame);
-    let dir = ctx.cache.stage_dir("graphcut");
+    let (grid, sdf) = reconstruction::read_grid(ctx.cache, Surface::Hull, frame)?;
+    let dir = ctx.cache.stage_dir(Surface::Refined.stage());
     let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
     if !occupied.iter().any(|&o| o) {
         // An empty hull stays empty.
         let warning = format!("frame {frame}: the hull is empty");
-        let grid_data = visual_hull::grid_bytes(&grid, &sdf);
-        return write_reconstruction(&dir, frame, &TriMesh::default(), &grid_data, vec![warning]);
+        return Ok(Output {
+            files: reconstruction::write(&dir, frame, &TriMesh::default(), &grid, &sdf)?,
+            warnings: vec![warning],
+        });
     }
     if !ctx.sequence.has_frames {
         // Nothing to refine with: the hull passes through unchanged.
-        let hull_dir = ctx.cache.stage_dir("visual_hull");
-        let mesh = crate::geometry::ply::read_ply(&hull_dir.join(&ply))?;
-        let grid_data = visual_hull::grid_bytes(&grid, &sdf);
-        let note = vec![format!("graphcut: {MASKS_ONLY_GRAPHCUT}")];
-        return write_reconstruction(&dir, frame, &mesh, &grid_data, note);
+        let mesh = reconstruction::read_mesh(ctx.cache, Surface::Hull, frame)?;
+        return Ok(Output {
+            files: reconstruction::write(&dir, frame, &mesh, &grid, &sdf)?,
+            warnings: vec![format!("graphcut: {MASKS_ONLY_GRAPHCUT}")],
+        });
     }
-    let hull = crate::geometry::ply::read_ply(&ctx.cache.stage_dir("visual_hull").join(&ply))?;
+    let hull = reconstruction::read_mesh(ctx.cache, Surface::Hull, frame)?;
     let cams = &ctx.sequence.cameras;
     let depth = crate::photo::depth_maps(cams, &hull);
     let images = grey_frames(ctx, frame)?;
@@ -667,7 +539,7 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
         &mut report,
     );
     spinner.finish_and_clear();
-    let hull_on_cones = load_hull_on_cones(ctx, frame, &sdf)?;
+    let hull_on_cones = reconstruction::read_hull_on_cones(ctx.cache, frame, &sdf)?;
     let (refined_sdf, mut mesh) =
         graphcut::mesh(&grid, &refined, &hull_on_cones, p.smoothing_iterations);
     if p.photo_refine > 0.0 {
@@ -679,11 +551,8 @@ fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
             .collect();
         refine_along_normals(cams, &smoothed, &mut mesh, grid.voxel, &settings);
     }
-    write_reconstruction(
-        &dir,
-        frame,
-        &mesh,
-        &visual_hull::grid_bytes(&grid, &refined_sdf),
-        Vec::new(),
-    )
+    Ok(Output {
+        files: reconstruction::write(&dir, frame, &mesh, &grid, &refined_sdf)?,
+        warnings: Vec::new(),
+    })
 }

@@ -7,11 +7,12 @@
 //! reads ([`BodyModel::to_bytes`]), and `model.ply`, the surface coloured by part with the
 //! part label and the two strongest (bone, weight) pairs as extra vertex properties.
 
-use super::{hull_files, Context, Output};
+use super::{Context, Output};
+use crate::artifacts::reconstruction::{self, Surface};
 use crate::cache::KeyBuilder;
 use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
-use crate::skeleton::model::{bones_inside, build, part_colour, BodyModel};
+use crate::skeleton::model::{bones_inside, build};
 use crate::skeleton::Skeleton;
 
 /// `pipeline check`'s test of skeleton.yaml against the reference frame's surface, when it
@@ -24,15 +25,18 @@ pub fn check_skeleton(ctx: &Context) -> Result<Option<String>> {
     };
     let skeleton_path = ctx.sequence.dir.join("skeleton.yaml");
     let frame = skeleton.reference_frame;
-    let (ply, _) = hull_files(frame);
     let surface = match &ctx.config.model.mesh {
         Some(path) => Some((reference_surface(ctx, frame)?, path.clone())),
-        None => ["graphcut", "visual_hull"]
-            .iter()
-            .filter(|stage| ctx.cache.manifest(stage, frame).is_some())
-            .map(|stage| ctx.cache.stage_dir(stage).join(&ply))
-            .find(|path| path.is_file())
-            .map(|path| Ok::<_, Error>((crate::geometry::ply::read_ply(&path)?, path)))
+        None => [Surface::Refined, Surface::Hull]
+            .into_iter()
+            .filter(|s| ctx.cache.manifest(s.stage(), frame).is_some())
+            .find(|&s| reconstruction::mesh_path(ctx.cache, s, frame).is_file())
+            .map(|s| {
+                Ok::<_, Error>((
+                    reconstruction::read_mesh(ctx.cache, s, frame)?,
+                    reconstruction::mesh_path(ctx.cache, s, frame),
+                ))
+            })
             .transpose()?,
     };
     let Some((mesh, path)) = surface else {
@@ -49,10 +53,6 @@ pub fn check_skeleton(ctx: &Context) -> Result<Option<String>> {
         path.display()
     )))
 }
-
-/// The model file's and the coloured PLY's names in the stage folder.
-pub const MODEL_FILE: &str = "model.hpm";
-pub const MODEL_PLY: &str = "model.ply";
 
 pub(super) fn sources(ctx: &Context, _frame: u32, key: &mut KeyBuilder) -> Result<()> {
     key.add_file(&ctx.sequence.dir.join("skeleton.yaml"))?;
@@ -82,15 +82,11 @@ fn reference_surface(ctx: &Context, frame: u32) -> Result<TriMesh> {
                 )),
             }
         }
-        None => {
-            let (ply, _) = hull_files(frame);
-            crate::geometry::ply::read_ply(&ctx.cache.stage_dir("graphcut").join(ply))
-        }
+        None => reconstruction::read_mesh(ctx.cache, Surface::Refined, frame),
     }
 }
 
 pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
-    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let skeleton_path = ctx.sequence.dir.join("skeleton.yaml");
     let skeleton = Skeleton::read(&skeleton_path)?;
     let mesh = reference_surface(ctx, frame)?;
@@ -115,59 +111,9 @@ pub(super) fn compute(ctx: &Context, frame: u32) -> Result<Output> {
         };
         Error::invalid(&source, format!("model (reference frame {frame}): {m}"))
     })?;
-    let dir = ctx.cache.stage_dir("model");
-    let colours: Vec<[u8; 3]> = model.labels.iter().map(|&l| part_colour(l)).collect();
-    let normals = model.mesh.vertex_normals();
-    let label: Vec<f32> = model.labels.iter().map(|&l| l as f32).collect();
-    let strongest = |k: usize, bone: bool| -> Vec<f32> {
-        model
-            .weights
-            .iter()
-            .map(|w| {
-                let mut w = w.clone();
-                w.sort_by(|a, b| b.1.total_cmp(&a.1));
-                match w.get(k) {
-                    Some(&(b, _)) if bone => b as f32,
-                    Some(&(_, x)) => x as f32,
-                    None if bone => -1.0,
-                    None => 0.0,
-                }
-            })
-            .collect()
-    };
-    let (b0, w0, b1, w1) = (
-        strongest(0, true),
-        strongest(0, false),
-        strongest(1, true),
-        strongest(1, false),
-    );
-    let attrs = VertexAttributes {
-        normals: Some(&normals),
-        colors: Some(&colours),
-        scalars: vec![
-            ("part", &label),
-            ("bone0", &b0),
-            ("weight0", &w0),
-            ("bone1", &b1),
-            ("weight1", &w1),
-        ],
-    };
-    write_ply(
-        &dir.join(MODEL_PLY),
-        &model.mesh,
-        &attrs,
-        PlyFormat::BinaryLittleEndian,
+    let files = crate::artifacts::body_model::write(
+        &ctx.cache.stage_dir(crate::artifacts::body_model::STAGE),
+        &model,
     )?;
-    crate::fsutil::write_atomic(&dir.join(MODEL_FILE), &model.to_bytes())?;
-    Ok(Output {
-        files: vec![MODEL_FILE.into(), MODEL_PLY.into()],
-        warnings,
-    })
-}
-
-/// Reads the cached body model.
-pub fn load(ctx: &Context) -> Result<BodyModel> {
-    let path = ctx.cache.stage_dir("model").join(MODEL_FILE);
-    let data = crate::limits::read_cache_file(&path)?;
-    BodyModel::parse(&path, &data)
+    Ok(Output { files, warnings })
 }

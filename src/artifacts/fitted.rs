@@ -3,16 +3,48 @@
 //! the frame's worst silhouette IoU. A resumed run reads this instead of re-parsing the
 //! rounded CSV rows, so a run killed and resumed writes what a fresh run writes, byte for
 //! byte. File: `NNNNNN.state.json` in the fit stage's folder.
+//!
+//! The other files of a fitted frame are written by [`crate::stages::fit`] under the names
+//! [`files`] gives: the pose and joint rows, the diagnostics row, the posed surface.
 
+use crate::cache::Cache;
+use crate::dataset::frame_stem;
 use crate::error::{Error, Result};
 use crate::fit::{FitDiagnostics, FitStatus};
 use crate::skeleton::Pose;
+use crate::skeleton::Skeleton;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Format of the state file (bumped with any change of its fields or meaning).
 const FORMAT: u32 = 1;
+
+/// The stage folder's name.
+pub const STAGE: &str = "fit";
+
+/// The per-frame file names: (pose, joints, diagnostics, mesh, state between frames).
+pub fn files(frame: u32) -> [String; 5] {
+    let s = frame_stem(frame);
+    [
+        format!("{s}.pose.csv"),
+        format!("{s}.joints.csv"),
+        format!("{s}.fit.csv"),
+        format!("{s}.ply"),
+        format!("{s}.state.json"),
+    ]
+}
+
+/// Reads a cached frame's state (its pose and diagnostics at full precision).
+pub fn read_state(cache: &Cache, skeleton: &Skeleton, frame: u32) -> Result<FitState> {
+    let path = cache.stage_dir(STAGE).join(&files(frame)[4]);
+    read(&path, frame, skeleton.bones.len())
+}
+
+/// Reads a cached frame's pose.
+pub fn read_pose(cache: &Cache, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
+    Ok(read_state(cache, skeleton, frame)?.pose)
+}
 
 /// A fitted frame's state.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,7 +80,7 @@ struct StateFile {
 }
 
 /// Writes `state` of `frame` to `path` (atomically).
-pub fn write(path: &Path, frame: u32, state: &FitState) -> Result<()> {
+pub fn write_state(path: &Path, frame: u32, state: &FitState) -> Result<()> {
     let d = &state.diagnostics;
     let file = StateFile {
         format: FORMAT,
@@ -83,7 +115,7 @@ pub fn write(path: &Path, frame: u32, state: &FitState) -> Result<()> {
 }
 
 /// Reads the state of `frame` for a skeleton of `bones` bones from `path`.
-pub fn read(path: &Path, frame: u32, bones: usize) -> Result<FitState> {
+fn read(path: &Path, frame: u32, bones: usize) -> Result<FitState> {
     let text = crate::fsutil::read_to_string(path)?;
     let bad = |m: String| {
         Error::invalid(
@@ -159,7 +191,7 @@ mod tests {
             diagnostics,
             iou_worst: 0.1 + 0.2,
         };
-        write(&path, 3, &state).unwrap();
+        write_state(&path, 3, &state).unwrap();
         assert_eq!(read(&path, 3, 2).unwrap(), state);
         assert!(read(&path, 4, 2).is_err());
         assert!(read(&path, 3, 3).is_err());

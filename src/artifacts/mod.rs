@@ -1,0 +1,18 @@
+//! The cached artifacts, one module per kind: each owns its files' names in its stage's
+//! folder, its format, its writer and its reader. Nothing else builds a cache path or
+//! parses an artifact; the stages, the exports and the tools read and write through these.
+//!
+//! | artifact | stage folder | files per frame |
+//! |---|---|---|
+//! | [`silhouettes`] | `silhouette` | `NNNNNN/<camera>.png` |
+//! | [`reconstruction`] (hull) | `visual_hull` | `NNNNNN.ply`, `NNNNNN.grid`, `NNNNNN.band` |
+//! | [`reconstruction`] (refined) | `graphcut` | `NNNNNN.ply`, `NNNNNN.grid` |
+//! | [`observation`] | `reliability` | `NNNNNN.ply`, `NNNNNN.obs` |
+//! | [`body_model`] | `model` | `model.hpm`, `model.ply` (reference frame) |
+//! | fitted frame ([`crate::stages::fit`], [`crate::stages::fit_state`]) | `fit` | see there |
+
+pub mod body_model;
+pub mod fitted;
+pub mod observation;
+pub mod reconstruction;
+pub mod silhouettes;
