@@ -156,7 +156,7 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
     let masks = crate::stages::load_silhouettes(&ctx, frame)?;
     let mut timings = gc::Timings::default();
     let t = Instant::now();
-    let refined = gc::refine_timed(
+    let refined = gc::min_cut_occupancy_timed(
         &grid,
         &occupied,
         &sdf,
@@ -573,7 +573,7 @@ pub fn fit(job: &Job, frame: u32, spacing: Option<f64>) -> Result<String> {
         params.sample_spacing = s;
         params.model_spacing = s;
     }
-    let obs = crate::stages::fit::observation(&ctx, frame)?;
+    let obs = crate::stages::fit::cached_observation(&ctx, frame)?;
     let model_count = crate::fit::thin(&model.mesh.vertices, params.model_spacing).len();
     let obs_count = crate::fit::thin(&obs.vertices, params.sample_spacing).len();
     let t = Instant::now();

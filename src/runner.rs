@@ -6,7 +6,7 @@ use crate::cache::{ArtifactState, Cache, KeyBuilder, Manifest};
 use crate::config::{Config, FrameRange};
 use crate::dataset::Sequence;
 use crate::error::{Error, Result};
-use crate::stages::{self, Compute, Context, Scope, StageDef, STAGES};
+use crate::stages::{self, Compute, Context, Produced, Scope, StageDef, STAGES};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -284,7 +284,7 @@ impl Job {
         let ctx = self.context();
         let mut keys: HashMap<(&'static str, u32), String> = HashMap::new();
         for stage in STAGES {
-            let params = (stage.params)(&self.config);
+            let params = stage.settings_text(&self.config, &self.sequence)?;
             let frames = self.stage_frames(stage, reference);
             let key_of = |f: u32, keys: &HashMap<(&'static str, u32), String>| -> Result<String> {
                 let mut k = KeyBuilder::new();
@@ -493,6 +493,21 @@ impl StageRun<'_> {
         }
     }
 
+    /// Writes a frame's computed artifact into the stage's folder and records it in the
+    /// cache; returns its warnings.
+    fn write(
+        &self,
+        stage: &StageDef,
+        f: u32,
+        produced: Produced,
+        seconds: f64,
+    ) -> Result<Vec<String>> {
+        let dir = self.job.cache.stage_dir(stage.name);
+        let files = produced.artifact.write(&dir, f)?;
+        self.commit(stage, f, files, seconds)?;
+        Ok(produced.warnings)
+    }
+
     /// Records a computed artifact in the cache.
     fn commit(&self, stage: &StageDef, f: u32, files: Vec<String>, seconds: f64) -> Result<()> {
         self.job.cache.commit(&Manifest {
@@ -566,10 +581,10 @@ impl StageRun<'_> {
                             unreachable!("a per-frame stage computes frames")
                         };
                         let t = Instant::now();
-                        let o = compute(self.ctx, f)?;
+                        let o = compute.compute(self.ctx.config, &self.ctx.inputs(stage), f)?;
                         let seconds = t.elapsed().as_secs_f64();
-                        self.commit(stage, f, o.files, seconds)?;
-                        out.push(Some((o.warnings, seconds)));
+                        let warnings = self.write(stage, f, o, seconds)?;
+                        out.push(Some((warnings, seconds)));
                         bars[k].inc(1);
                     }
                     Ok(out)
@@ -628,30 +643,32 @@ impl StageRun<'_> {
         }
         let pending = self.pending(stage, forced);
         let progress = bar(pending.todo.len(), stage.name);
-        let commit = |f: u32, files: Vec<String>, seconds: f64| -> Result<()> {
-            self.commit(stage, f, files, seconds)?;
-            progress.inc(1);
-            Ok(())
-        };
+        let inputs = ctx.inputs(stage);
         let mut warnings: Vec<Vec<String>> = match stage.compute {
             Compute::Frame(compute) => pending
                 .todo
                 .par_iter()
                 .map(|&f| {
                     let t = Instant::now();
-                    let out = compute(ctx, f)?;
-                    commit(f, out.files, t.elapsed().as_secs_f64())?;
-                    Ok(out.warnings)
+                    let out = compute.compute(ctx.config, &inputs, f)?;
+                    let warnings = self.write(stage, f, out, t.elapsed().as_secs_f64())?;
+                    progress.inc(1);
+                    Ok(warnings)
                 })
                 .collect::<Result<_>>()?,
             // Tracked frames depend on each other: in order, one at a time.
             Compute::Tracked(compute) => {
                 let mut warnings = Vec::new();
-                compute(ctx, &pending.todo, &mut |f, out, seconds| {
-                    commit(f, out.files, seconds)?;
-                    warnings.push(out.warnings);
-                    Ok(())
-                })?;
+                compute.compute(
+                    ctx.config,
+                    &inputs,
+                    &pending.todo,
+                    &mut |f, out, seconds| {
+                        warnings.push(self.write(stage, f, out, seconds)?);
+                        progress.inc(1);
+                        Ok(())
+                    },
+                )?;
                 warnings
             }
         };

@@ -32,8 +32,14 @@ pub fn read(cache: &Cache) -> Result<BodyModel> {
     parse_model(&path, &data)
 }
 
+impl super::Artifact for BodyModel {
+    fn write(&self, dir: &Path, _frame: u32) -> Result<Vec<String>> {
+        write(dir, self)
+    }
+}
+
 /// Writes `model` into `dir`; returns the files, relative to it.
-pub fn write(dir: &Path, model: &BodyModel) -> Result<Vec<String>> {
+fn write(dir: &Path, model: &BodyModel) -> Result<Vec<String>> {
     use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let colours: Vec<[u8; 3]> = model.labels.iter().map(|&l| part_colour(l)).collect();
     let normals = model.mesh.vertex_normals();

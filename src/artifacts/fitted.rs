@@ -11,6 +11,7 @@ use crate::cache::Cache;
 use crate::dataset::frame_stem;
 use crate::error::{Error, Result};
 use crate::fit::{FitDiagnostics, FitStatus};
+use crate::geometry::TriMesh;
 use crate::skeleton::Pose;
 use crate::skeleton::Skeleton;
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -24,7 +25,7 @@ const FORMAT: u32 = 1;
 pub const STAGE: &str = "fit";
 
 /// The per-frame file names: (pose, joints, diagnostics, mesh, state between frames).
-pub fn files(frame: u32) -> [String; 5] {
+fn files(frame: u32) -> [String; 5] {
     let s = frame_stem(frame);
     [
         format!("{s}.pose.csv"),
@@ -33,6 +34,63 @@ pub fn files(frame: u32) -> [String; 5] {
         format!("{s}.ply"),
         format!("{s}.state.json"),
     ]
+}
+
+/// A fitted frame: its rows of poses.csv, joints.csv and fit.csv (each with its header),
+/// the posed model coloured by part, and its state.
+pub struct FittedFrame {
+    pub poses_csv: String,
+    pub joints_csv: String,
+    pub diagnostics_csv: String,
+    pub mesh: TriMesh,
+    pub colours: Vec<[u8; 3]>,
+    pub state: FitState,
+}
+
+impl super::Artifact for FittedFrame {
+    fn write(&self, dir: &Path, frame: u32) -> Result<Vec<String>> {
+        use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
+        let names = files(frame);
+        crate::fsutil::write_atomic(&dir.join(&names[0]), self.poses_csv.as_bytes())?;
+        crate::fsutil::write_atomic(&dir.join(&names[1]), self.joints_csv.as_bytes())?;
+        crate::fsutil::write_atomic(&dir.join(&names[2]), self.diagnostics_csv.as_bytes())?;
+        let normals = self.mesh.vertex_normals();
+        write_ply(
+            &dir.join(&names[3]),
+            &self.mesh,
+            &VertexAttributes {
+                normals: Some(&normals),
+                colors: Some(&self.colours),
+                scalars: Vec::new(),
+            },
+            PlyFormat::BinaryLittleEndian,
+        )?;
+        // Written last: a frame whose state exists has every other file.
+        write_state(&dir.join(&names[4]), frame, &self.state)?;
+        Ok(names.to_vec())
+    }
+}
+
+/// A cached fitted frame's CSV rows, without their headers.
+pub struct Rows {
+    pub poses: String,
+    pub joints: String,
+    pub diagnostics: String,
+}
+
+/// Reads a cached fitted frame's rows of poses.csv, joints.csv and fit.csv.
+pub fn read_rows(cache: &Cache, frame: u32) -> Result<Rows> {
+    let dir = cache.stage_dir(STAGE);
+    let names = files(frame);
+    let body = |name: &str| -> Result<String> {
+        let text = crate::fsutil::read_to_string(&dir.join(name))?;
+        Ok(text.split_once('\n').map_or("", |x| x.1).to_string())
+    };
+    Ok(Rows {
+        poses: body(&names[0])?,
+        joints: body(&names[1])?,
+        diagnostics: body(&names[2])?,
+    })
 }
 
 /// Reads a cached frame's state (its pose and diagnostics at full precision).
@@ -80,7 +138,7 @@ struct StateFile {
 }
 
 /// Writes `state` of `frame` to `path` (atomically).
-pub fn write_state(path: &Path, frame: u32, state: &FitState) -> Result<()> {
+fn write_state(path: &Path, frame: u32, state: &FitState) -> Result<()> {
     let d = &state.diagnostics;
     let file = StateFile {
         format: FORMAT,

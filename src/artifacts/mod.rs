@@ -11,8 +11,19 @@
 //! | [`body_model`] | `model` | `model.hpm`, `model.ply` (reference frame) |
 //! | fitted frame ([`crate::stages::fit`], [`crate::stages::fit_state`]) | `fit` | see there |
 
+use crate::error::Result;
+use std::path::Path;
+
 pub mod body_model;
 pub mod fitted;
 pub mod observation;
 pub mod reconstruction;
 pub mod silhouettes;
+
+/// A frame's computed artifact, as a stage hands it to the runner: the runner alone writes
+/// it into the stage's folder and records it in the cache.
+pub trait Artifact: Send {
+    /// Writes the artifact of `frame` into the stage folder `dir`; returns the files,
+    /// relative to it (the last one written is the one whose presence marks it complete).
+    fn write(&self, dir: &Path, frame: u32) -> Result<Vec<String>>;
+}

@@ -6,7 +6,7 @@ use crate::cache::Cache;
 use crate::dataset::frame_stem;
 use crate::error::{Error, Result};
 use crate::geometry::TriMesh;
-use crate::recon::reliability::{Observed, ReliabilityParams};
+use crate::recon::reliability::Observed;
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
@@ -31,23 +31,35 @@ pub fn read(cache: &Cache, frame: u32) -> Result<Observed> {
     parse_observation(&path, &data)
 }
 
-/// Writes a frame's observation of `mesh` into `dir` (the PLY coloured as `p` says);
-/// returns the files, relative to it.
-pub fn write(
+/// A frame's observed surface: the refined mesh, its vertices' reliability, and the colour
+/// each vertex gets in the PLY.
+pub struct Observation {
+    pub mesh: TriMesh,
+    pub observed: Observed,
+    pub colours: Vec<[u8; 3]>,
+}
+
+impl super::Artifact for Observation {
+    fn write(&self, dir: &Path, frame: u32) -> Result<Vec<String>> {
+        write(dir, frame, &self.mesh, &self.observed, &self.colours)
+    }
+}
+
+/// Writes a frame's observation of `mesh` into `dir`; returns the files, relative to it.
+fn write(
     dir: &Path,
     frame: u32,
     mesh: &TriMesh,
     observed: &Observed,
-    p: &ReliabilityParams,
+    colours: &[[u8; 3]],
 ) -> Result<Vec<String>> {
     use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
     let (ply, obs) = files(frame);
     let normals: Vec<Vector3<f64>> = observed.normals.iter().map(|n| n.cast()).collect();
-    let colours = observed.colours(p);
     let cameras: Vec<f32> = observed.cameras.iter().map(|&c| c as f32).collect();
     let attrs = VertexAttributes {
         normals: Some(&normals),
-        colors: Some(&colours),
+        colors: Some(colours),
         scalars: vec![
             ("quality", &observed.zncc),
             ("zncc", &observed.zncc),

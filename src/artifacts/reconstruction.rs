@@ -87,9 +87,30 @@ pub fn read_hull_on_cones(cache: &Cache, frame: u32, sdf: &[f32]) -> Result<Vec<
     Ok(parse_band(&path, &data, sdf.len())?.applied_to(sdf))
 }
 
+/// A frame's reconstruction: its surface, its grid and signed distance, and for the hull
+/// its solid on the cones.
+pub struct Reconstruction {
+    pub mesh: TriMesh,
+    pub grid: GridSpec,
+    /// Signed distance per voxel, metres (negative inside).
+    pub sdf: Vec<f32>,
+    /// The hull's band; `None` for the refined surface.
+    pub band: Option<ConeBand>,
+}
+
+impl super::Artifact for Reconstruction {
+    fn write(&self, dir: &Path, frame: u32) -> Result<Vec<String>> {
+        let mut files = write(dir, frame, &self.mesh, &self.grid, &self.sdf)?;
+        if let Some(band) = &self.band {
+            files.push(write_band(dir, frame, band)?);
+        }
+        Ok(files)
+    }
+}
+
 /// Writes a frame's mesh (binary PLY with normals) and grid into `dir`; returns the files,
 /// relative to it.
-pub fn write(
+fn write(
     dir: &Path,
     frame: u32,
     mesh: &TriMesh,
@@ -109,7 +130,7 @@ pub fn write(
 }
 
 /// Writes the hull's band of a frame into `dir`; returns the file, relative to it.
-pub fn write_band(dir: &Path, frame: u32, band: &ConeBand) -> Result<String> {
+fn write_band(dir: &Path, frame: u32, band: &ConeBand) -> Result<String> {
     let name = band_file(frame);
     crate::fsutil::write_atomic(&dir.join(&name), &band_bytes(band))?;
     Ok(name)

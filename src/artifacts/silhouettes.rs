@@ -16,21 +16,24 @@ fn file(frame: u32, camera: &str) -> String {
     format!("{}/{camera}.png", frame_stem(frame))
 }
 
-/// Writes a frame's masks (one per camera, in calibration order) into `dir`; returns the
-/// files, relative to it.
-pub fn write(
-    dir: &Path,
-    frame: u32,
-    cameras: &[Camera],
-    masks: &[GrayImage],
-) -> Result<Vec<String>> {
-    let mut files = Vec::with_capacity(masks.len());
-    for (cam, mask) in cameras.iter().zip(masks) {
-        let rel = file(frame, &cam.name);
-        crate::imageio::write_gray(&dir.join(&rel), mask)?;
-        files.push(rel);
+/// A frame's masks, one per camera.
+pub struct Silhouettes {
+    /// The cameras' names, in calibration order.
+    pub cameras: Vec<String>,
+    /// Their masks (255 = subject).
+    pub masks: Vec<GrayImage>,
+}
+
+impl super::Artifact for Silhouettes {
+    fn write(&self, dir: &Path, frame: u32) -> Result<Vec<String>> {
+        let mut files = Vec::with_capacity(self.masks.len());
+        for (name, mask) in self.cameras.iter().zip(&self.masks) {
+            let rel = file(frame, name);
+            crate::imageio::write_gray(&dir.join(&rel), mask)?;
+            files.push(rel);
+        }
+        Ok(files)
     }
-    Ok(files)
 }
 
 /// Reads a frame's masks from the cache, one per camera in calibration order.

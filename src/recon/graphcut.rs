@@ -152,7 +152,7 @@ pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
 
 /// The refined occupancy of one frame.
 #[allow(clippy::too_many_arguments)]
-pub fn refine(
+pub fn min_cut_occupancy(
     grid: &GridSpec,
     occupied: &[bool],
     sdf: &[f32],
@@ -163,7 +163,7 @@ pub fn refine(
     p: &GraphcutParams,
     progress: &mut dyn FnMut(f64, u64),
 ) -> Vec<bool> {
-    refine_timed(
+    min_cut_occupancy_timed(
         grid,
         occupied,
         sdf,
@@ -177,7 +177,7 @@ pub fn refine(
     )
 }
 
-/// Where [`refine`]'s time went (seconds), for benchmarks.
+/// Where [`min_cut_occupancy`]'s time went (seconds), for benchmarks.
 #[derive(Debug, Default)]
 pub struct Timings {
     pub band_voxels: usize,
@@ -185,9 +185,9 @@ pub struct Timings {
     pub cut: f64,
 }
 
-/// [`refine`], recording [`Timings`].
+/// [`min_cut_occupancy`], recording [`Timings`].
 #[allow(clippy::too_many_arguments)]
-pub fn refine_timed(
+pub fn min_cut_occupancy_timed(
     grid: &GridSpec,
     occupied: &[bool],
     sdf: &[f32],

@@ -218,7 +218,7 @@ pub fn carve(
                 keep: 0,
                 against: 0,
             };
-            refine(
+            carve_block(
                 grid,
                 cams,
                 counts,
@@ -256,7 +256,7 @@ struct Votes {
 /// not see (footprint outside its image) a block says the same of every voxel inside, so it
 /// is not asked again below.
 #[allow(clippy::too_many_arguments)]
-fn refine(
+fn carve_block(
     grid: &GridSpec,
     cams: &[Camera],
     counts: &[MaskCounts],
@@ -338,7 +338,7 @@ fn refine(
     for dz in [0, half] {
         for dy in [0, half] {
             for dx in [0, half] {
-                refine(
+                carve_block(
                     grid,
                     cams,
                     counts,

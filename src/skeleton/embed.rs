@@ -289,7 +289,7 @@ pub fn embed_scored(
 
     let (placed, scale) = place(&interior, template, &tpl, &weights)?;
     let finish = |joints: Joints| -> Result<(Joints, f64), String> {
-        let refined = refine(&interior, template, &tpl, joints, scale, &weights);
+        let refined = descend_joints(&interior, template, &tpl, joints, scale, &weights);
         check(&interior, template, &refined)?;
         let uncovered = check_coverage(&interior, template, &refined, &local)?;
         Ok((refined, uncovered))
@@ -676,7 +676,7 @@ fn follow_limbs(interior: &Interior, template: &Skeleton, mut joints: Joints) ->
 }
 
 /// Step 4: gradient descent on the joints' positions.
-fn refine(
+fn descend_joints(
     interior: &Interior,
     template: &Skeleton,
     tpl: &Joints,

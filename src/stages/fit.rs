@@ -6,9 +6,11 @@
 //! After the stage, the output folder gets the whole run's `joints.csv`, `poses.csv` and
 //! `fit.csv`.
 
-use super::{Context, Output};
-use crate::artifacts::fitted::{self, files, FitState};
+use super::{Context, Done, InOrder, Inputs, Produced};
+use crate::artifacts::fitted::{self, FitState, FittedFrame};
 use crate::cache::KeyBuilder;
+use crate::config::Config;
+use crate::dataset::Sequence;
 use crate::error::{Error, Result};
 use crate::fit::{
     FitDiagnostics, FitResult, FitStatus, Fitter, Neighbours, Observation, Probe, Tracker,
@@ -16,6 +18,7 @@ use crate::fit::{
 use crate::joints::JointRow;
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::{Pose, Skeleton};
+use serde::Serialize;
 use std::path::Path;
 
 /// Header of the diagnostics CSV.
@@ -34,6 +37,33 @@ pub const HEALTH_HEADER: &str =
 
 pub(super) fn sources(_ctx: &Context, _frame: u32, _key: &mut KeyBuilder) -> Result<()> {
     Ok(())
+}
+
+/// What the stage reads besides its inputs' artifacts.
+#[derive(Debug, Clone, Serialize)]
+pub struct Settings {
+    pub fit: crate::fit::FitParams,
+    /// Capture frame rate, frames per second (`export.frame_rate`): the motion prior's
+    /// weight and the joint-speed check.
+    pub frame_rate: f64,
+    /// Whether the capture has frame images (without, the fit weighs contacts only and
+    /// leaves the unexplained-surface check out).
+    pub photo: bool,
+}
+
+/// The stage's name.
+const STAGE_NAME: &str = fitted::STAGE;
+
+/// The stage.
+pub static STAGE: InOrder<Settings> = InOrder { resolve, compute };
+
+/// The fit's settings from pipeline.yaml and the capture.
+pub fn resolve(config: &Config, sequence: &Sequence) -> Result<Settings> {
+    Ok(Settings {
+        fit: config.fit.clone(),
+        frame_rate: config.export.frame_rate,
+        photo: sequence.has_frames,
+    })
 }
 
 /// One diagnostics row (no header).
@@ -67,13 +97,23 @@ pub fn joint_rows(skeleton: &Skeleton, frame: u32, pose: &Pose) -> Vec<JointRow>
 }
 
 /// A frame's observed surface as the fit reads it.
-pub fn observation(ctx: &Context, frame: u32) -> Result<Observation> {
-    let o = crate::artifacts::observation::read(ctx.cache, frame)?;
-    Ok(Observation {
+fn observation(inputs: &Inputs, frame: u32) -> Result<Observation> {
+    Ok(as_observation(inputs.observation(frame)?))
+}
+
+/// A cached frame's observed surface as the fit reads it (for the benchmarks).
+pub fn cached_observation(ctx: &Context, frame: u32) -> Result<Observation> {
+    Ok(as_observation(crate::artifacts::observation::read(
+        ctx.cache, frame,
+    )?))
+}
+
+fn as_observation(o: crate::recon::reliability::Observed) -> Observation {
+    Observation {
         vertices: o.vertices.iter().map(|v| v.cast()).collect(),
         normals: o.normals.iter().map(|v| v.cast()).collect(),
         rho_p: o.rho_p.iter().map(|&v| v as f64).collect(),
-    })
+    }
 }
 
 /// Tracks `frames` (in computation order, as [`crate::runner::Job::tracked_frames`] gives
@@ -81,18 +121,19 @@ pub fn observation(ctx: &Context, frame: u32) -> Result<Observation> {
 /// `pipeline run` and `pipeline bench track`. Each frame's fit starts from its neighbour's
 /// pose in memory; a neighbour not among `frames` is read back from the cache. After each
 /// frame, `done` gets its fit and the seconds the fit took (loading excluded).
-pub fn track(
-    ctx: &Context,
+fn track(
+    inputs: &Inputs,
+    settings: &Settings,
     model: &BodyModel,
     frames: &[u32],
-    params: &crate::fit::FitParams,
     probe: &Probe,
     done: &mut dyn FnMut(u32, &FitResult, f64) -> Result<()>,
 ) -> Result<()> {
     let t0 = model.skeleton.reference_frame;
-    let seq = ctx.sequence;
+    let seq = inputs.sequence;
+    let params = &settings.fit;
     let mut fitter = Fitter::new(model, params.clone());
-    let frame_rate = ctx.config.export.frame_rate;
+    let frame_rate = settings.frame_rate;
     fitter.max_joint_step = Some(params.health.max_joint_speed / frame_rate);
     // The motion prior belongs to the proposed method's energy; the baselines stay the
     // methods the paper compares.
@@ -100,7 +141,7 @@ pub fn track(
         fitter.motion_prior =
             crate::fit::params::motion_prior_weight(params.motion_prior_acceleration, frame_rate);
     }
-    fitter.photo_consistent = seq.has_frames;
+    fitter.photo_consistent = settings.photo;
     let mut tracker = Tracker::new(fitter);
     for &frame in frames {
         let neighbours = if frame == t0 {
@@ -112,13 +153,13 @@ pub fn track(
             let before = seq.tracked_previous(previous, t0);
             for f in std::iter::once(previous).chain(before) {
                 if !tracker.knows(f) {
-                    let state = fitted::read_state(ctx.cache, &model.skeleton, f)?;
+                    let state = inputs.fitted_state(&model.skeleton, f)?;
                     tracker.know(f, state.pose, state.diagnostics);
                 }
             }
             Some(Neighbours { previous, before })
         };
-        let obs = observation(ctx, frame)?;
+        let obs = observation(inputs, frame)?;
         let started = std::time::Instant::now();
         let result = tracker.fit(frame, &obs, neighbours, probe);
         done(frame, &result, started.elapsed().as_secs_f64())?;
@@ -134,16 +175,22 @@ pub fn track_in_memory(
     params: &crate::fit::FitParams,
     progress: &dyn Fn(u32),
 ) -> Result<Tracked> {
-    let model = crate::artifacts::body_model::read(ctx.cache)?;
+    let fit = super::find(STAGE_NAME)?;
+    let inputs = ctx.inputs(fit);
+    let settings = Settings {
+        fit: params.clone(),
+        ..resolve(ctx.config, ctx.sequence)?
+    };
+    let model = inputs.body_model()?;
     let probe = Probe::default();
     let mut out = Vec::with_capacity(frames.len());
     let mut seconds = Vec::with_capacity(frames.len());
     let mut rounds = Vec::new();
     track(
-        ctx,
+        &inputs,
+        &settings,
         &model,
         frames,
-        params,
         &probe,
         &mut |frame, result, secs| {
             seconds.push((frame, secs));
@@ -177,14 +224,10 @@ pub struct Tracked {
     pub rounds: Vec<(u32, crate::fit::RoundRecord)>,
 }
 
-/// The stage's computation: tracks `frames` ([`track`]), writing each frame's artifacts and
-/// handing them to `commit` as soon as the frame is fitted.
-pub(super) fn compute(
-    ctx: &Context,
-    frames: &[u32],
-    commit: &mut dyn FnMut(u32, Output, f64) -> Result<()>,
-) -> Result<()> {
-    let model = crate::artifacts::body_model::read(ctx.cache)?;
+/// The stage's computation: tracks `frames` ([`track`]), handing each frame's artifact
+/// to `done` as soon as the frame is fitted.
+fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> Result<()> {
+    let model = inputs.body_model()?;
     let probe = Probe::default();
     let checks = HealthChecks {
         coarse: crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL),
@@ -195,12 +238,12 @@ pub(super) fn compute(
     // computed, so a resumed run flags what a fresh one flags.
     let mut states: std::collections::HashMap<u32, FitState> = Default::default();
     let t0 = model.skeleton.reference_frame;
-    let seq = ctx.sequence;
+    let seq = inputs.sequence;
     track(
-        ctx,
+        inputs,
+        settings,
         &model,
         frames,
-        &ctx.config.fit,
         &probe,
         &mut |frame, result, secs| {
             // The run keeps no round log: dropped frame by frame, so it never grows.
@@ -214,7 +257,7 @@ pub(super) fn compute(
                 };
                 let state = match states.get(&p) {
                     Some(s) => s.clone(),
-                    None => fitted::read_state(ctx.cache, &model.skeleton, p)?,
+                    None => inputs.fitted_state(&model.skeleton, p)?,
                 };
                 previous.push(state);
                 at = p;
@@ -236,11 +279,12 @@ pub(super) fn compute(
             } else {
                 Some(match states.get(&t0) {
                     Some(s) => s.iou_worst,
-                    None => fitted::read_state(ctx.cache, &model.skeleton, t0)?.iou_worst,
+                    None => inputs.fitted_state(&model.skeleton, t0)?.iou_worst,
                 })
             };
-            let (out, state) = write_frame(
-                ctx,
+            let produced = fitted_frame(
+                inputs,
+                settings,
                 &model,
                 &checks,
                 &recent,
@@ -250,14 +294,14 @@ pub(super) fn compute(
                 frame,
                 result,
             )?;
-            states.insert(frame, state);
+            states.insert(frame, produced.1);
             // Only the last few frames and t0 are read again (others come from the cache).
             if states.len() > 4 * crate::fit::health::RECENT_FRAMES {
                 states.retain(|&f, _| {
                     f == t0 || f.abs_diff(frame) <= crate::fit::health::RECENT_FRAMES as u32 + 1
                 });
             }
-            commit(frame, out, secs)
+            done(frame, produced.0, secs)
         },
     )
 }
@@ -272,14 +316,15 @@ struct HealthChecks {
     capsules: crate::fit::interpenetration::Capsules,
 }
 
-/// Writes a frame's artifacts and returns them with the frame's state; `recent` holds the
-/// worst silhouette IoU of the previous tracked frames (oldest first; its health checks
-/// compare against them), `reference_iou` the reference frame's, `previous_pose` the
-/// previous tracked frame's pose (both none at the reference frame) and `previous_energy`
-/// the larger eq. 4 of the two previous tracked frames.
+/// A frame's artifact with the frame's state; `recent` holds the worst silhouette IoU of
+/// the previous tracked frames (oldest first; its health checks compare against them),
+/// `reference_iou` the reference frame's, `previous_pose` the previous tracked frame's pose
+/// (both none at the reference frame) and `previous_energy` the larger eq. 4 of the two
+/// previous tracked frames.
 #[allow(clippy::too_many_arguments)]
-fn write_frame(
-    ctx: &Context,
+fn fitted_frame(
+    inputs: &Inputs,
+    settings: &Settings,
     model: &BodyModel,
     checks: &HealthChecks,
     recent: &[f64],
@@ -288,23 +333,13 @@ fn write_frame(
     previous_energy: Option<f64>,
     frame: u32,
     result: &FitResult,
-) -> Result<(Output, FitState)> {
-    use crate::geometry::ply::{write_ply, PlyFormat, VertexAttributes};
-    let dir = ctx.cache.stage_dir(fitted::STAGE);
-    let names = files(frame);
+) -> Result<(Produced, FitState)> {
     let skeleton = &model.skeleton;
-    crate::poses::write(
-        &dir.join(&names[0]),
-        skeleton,
-        &[(frame, result.pose.clone())],
-    )?;
-    crate::joints::write(
-        &dir.join(&names[1]),
-        &joint_rows(skeleton, frame, &result.pose),
-    )?;
+    let poses_csv = crate::poses::to_csv(skeleton, &[(frame, result.pose.clone())]);
+    let joints_csv = crate::joints::to_csv(&joint_rows(skeleton, frame, &result.pose));
     let mesh = model.pose(&result.pose);
     let mut health = frame_health(
-        ctx,
+        inputs,
         model,
         frame,
         &result.pose,
@@ -318,20 +353,18 @@ fn write_frame(
     health.energy_ratio = previous_energy
         .filter(|&e| e > 0.0)
         .map_or(0.0, |e| result.diagnostics.energy / e);
-    health.unexplained_cm2 = ctx
-        .sequence
-        .has_frames
-        .then(|| crate::fit::unexplained_cm2(&result.diagnostics, ctx.config.fit.sample_spacing));
-    let worst_camera = &ctx.sequence.cameras[health.iou_worst_camera].name;
-    let p = &ctx.config.fit.health;
+    health.unexplained_cm2 = settings
+        .photo
+        .then(|| crate::fit::unexplained_cm2(&result.diagnostics, settings.fit.sample_spacing));
+    let worst_camera = &inputs.sequence.cameras[health.iou_worst_camera].name;
     let flags = crate::fit::health::flags(
         &health,
         recent,
         reference_iou,
-        p,
-        ctx.config.export.frame_rate,
+        &settings.fit.health,
+        settings.frame_rate,
     );
-    let diag = format!(
+    let diagnostics_csv = format!(
         "{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n{},{:.4},{worst_camera},{:.4},{:.4},{},{},{}\n",
         diagnostics_row(frame, &result.diagnostics),
         health.iou_worst,
@@ -343,23 +376,11 @@ fn write_frame(
         result.diagnostics.recovery.as_deref().unwrap_or(""),
         flags.join("+"),
     );
-    crate::fsutil::write_atomic(&dir.join(&names[2]), diag.as_bytes())?;
     let colours: Vec<[u8; 3]> = model
         .labels
         .iter()
         .map(|&l| crate::skeleton::model::part_colour(l))
         .collect();
-    let normals = mesh.vertex_normals();
-    write_ply(
-        &dir.join(&names[3]),
-        &mesh,
-        &VertexAttributes {
-            normals: Some(&normals),
-            colors: Some(&colours),
-            scalars: Vec::new(),
-        },
-        PlyFormat::BinaryLittleEndian,
-    )?;
     let mut warnings = Vec::new();
     if result.diagnostics.status == FitStatus::NoObservation {
         warnings.push(format!(
@@ -372,21 +393,21 @@ fn write_frame(
         diagnostics: result.diagnostics.clone(),
         iou_worst: health.iou_worst,
     };
-    // Written last: a frame whose state exists has every other file.
-    fitted::write_state(&dir.join(&names[4]), frame, &state)?;
-    Ok((
-        Output {
-            files: names.to_vec(),
-            warnings,
-        },
-        state,
-    ))
+    let artifact = FittedFrame {
+        poses_csv,
+        joints_csv,
+        diagnostics_csv,
+        mesh,
+        colours,
+        state: state.clone(),
+    };
+    Ok((Produced::new(artifact, warnings), state))
 }
 
 /// A fitted frame's health: the posed model (`mesh`, coarse) against the frame's
 /// silhouettes, and its joints' motion from the previous tracked frame's pose.
 fn frame_health(
-    ctx: &Context,
+    inputs: &Inputs,
     model: &BodyModel,
     frame: u32,
     pose: &Pose,
@@ -394,8 +415,8 @@ fn frame_health(
     mesh: &crate::geometry::TriMesh,
 ) -> Result<crate::fit::health::Health> {
     use crate::fit::health;
-    let masks = super::load_silhouettes(ctx, frame)?;
-    let iou = health::silhouette_iou(&ctx.sequence.cameras, &masks, mesh);
+    let masks = inputs.silhouettes(frame)?;
+    let iou = health::silhouette_iou(&inputs.sequence.cameras, &masks, mesh);
     let motion = previous_pose.map_or(0.0, |before| crate::fit::joint_motion(model, before, pose));
     Ok(health::summarize(&iou, motion))
 }
@@ -405,20 +426,15 @@ fn frame_health(
 pub(super) fn finish(ctx: &Context, frames: &[u32]) -> Result<super::Finished> {
     let mut frames = frames.to_vec();
     frames.sort_unstable();
-    let dir = ctx.cache.stage_dir(fitted::STAGE);
     let out = &ctx.config.output;
     let mut joints = String::new();
     let mut poses = String::new();
     let mut diag = format!("{DIAGNOSTICS_HEADER},{HEALTH_HEADER}\n");
     for &f in &frames {
-        let names = files(f);
-        let body = |name: &str| -> Result<String> {
-            let text = crate::fsutil::read_to_string(&dir.join(name))?;
-            Ok(text.split_once('\n').map_or("", |x| x.1).to_string())
-        };
-        joints += &body(&names[1])?;
-        poses += &body(&names[0])?;
-        diag += &body(&names[2])?;
+        let rows = fitted::read_rows(ctx.cache, f)?;
+        poses += &rows.poses;
+        joints += &rows.joints;
+        diag += &rows.diagnostics;
     }
     let written = [
         (

@@ -1,13 +1,26 @@
-//! The stages, and how the runner drives each: what a stage reads, how its cache key is
-//! made, and how its per-frame artifact is computed and written.
+//! The stages as the runner drives them. A stage is a function of what it reads:
 //!
-//! The algorithms live in one module per stage as plain functions on typed data; the
-//! [`StageDef`] adapters here do the file handling around them.
+//! - its **settings**, a struct resolved from pipeline.yaml and the capture (the fit's holds
+//!   the frame rate, the graph cut's whether the capture has frame images) — the runner
+//!   computes the stage's cache key from exactly this struct, so a key cannot miss a
+//!   parameter the stage reads;
+//! - its **sources**, the raw files it reads (masks, frames, plates, the calibration),
+//!   whose contents its key holds;
+//! - the artifacts of the stages it declares as **inputs**, read through [`Inputs`], which
+//!   refuses any other (their keys are in its key).
+//!
+//! It returns a typed artifact ([`crate::artifacts`]) and writes nothing: the runner writes
+//! the artifact and records it in the cache.
 
 pub mod fit;
+pub mod graphcut;
 pub mod model;
+pub mod reliability;
+pub mod silhouette;
+pub mod visual_hull;
 
-use crate::artifacts::{self, reconstruction, reconstruction::Surface};
+use crate::artifacts::reconstruction::{self, Surface};
+use crate::artifacts::Artifact;
 use crate::cache::{Cache, KeyBuilder};
 use crate::config::Config;
 use crate::dataset::Sequence;
@@ -15,13 +28,15 @@ use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
 use crate::photo::GreyImage;
-use crate::recon::silhouette::{self, SilhouetteMethod};
-use crate::recon::{graphcut, reliability, visual_hull};
+use crate::recon::silhouette::SilhouetteMethod;
 use rayon::prelude::*;
+use serde::Serialize;
 use std::collections::HashMap;
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 
-/// Everything a stage may read for one run.
+/// A run's view of the capture, the configuration and the cache (for the runner, and for
+/// the commands that read the cache).
 pub struct Context<'a> {
     pub config: &'a Config,
     pub sequence: &'a Sequence,
@@ -61,6 +76,117 @@ impl<'a> Context<'a> {
                 .remove(&frame);
         }
     }
+
+    /// What `stage` may read besides its settings.
+    pub fn inputs(&self, stage: &'static StageDef) -> Inputs<'_> {
+        Inputs {
+            sequence: self.sequence,
+            config_path: &self.config.path,
+            cache: self.cache,
+            stage,
+            frame_images: self.frame_images.as_ref(),
+        }
+    }
+}
+
+/// What a stage's computation may read besides its settings: the capture (cameras and raw
+/// files, which its key's sources cover) and the artifacts of the stages it declares as
+/// inputs. Reading any other stage's artifact is an error, so a stage's key cannot miss an
+/// artifact it reads.
+pub struct Inputs<'a> {
+    pub sequence: &'a Sequence,
+    /// pipeline.yaml, for naming it in errors (not a parameter: it is not in the key).
+    pub config_path: &'a Path,
+    cache: &'a Cache,
+    stage: &'static StageDef,
+    frame_images: Option<&'a FrameImages>,
+}
+
+impl Inputs<'_> {
+    /// Refuses to read `input`'s artifacts unless the stage declares it (or is it).
+    fn declared(&self, input: &str) -> Result<()> {
+        if self.stage.name == input || self.stage.inputs.contains(&input) {
+            Ok(())
+        } else {
+            Err(Error::Usage(format!(
+                "stage '{}' reads the '{input}' artifacts without declaring them as an input, \
+                 so its cache key would miss them (a defect of hullpose, please report it)",
+                self.stage.name
+            )))
+        }
+    }
+
+    /// A frame's silhouettes, one per camera.
+    pub fn silhouettes(&self, frame: u32) -> Result<Vec<image::GrayImage>> {
+        self.declared(crate::artifacts::silhouettes::STAGE)?;
+        crate::artifacts::silhouettes::read(self.cache, frame, &self.sequence.cameras)
+    }
+
+    /// A frame's reconstructed mesh.
+    pub fn mesh(&self, surface: Surface, frame: u32) -> Result<TriMesh> {
+        self.declared(surface.stage())?;
+        reconstruction::read_mesh(self.cache, surface, frame)
+    }
+
+    /// A frame's grid and signed distance.
+    pub fn grid(&self, surface: Surface, frame: u32) -> Result<(GridSpec, Vec<f32>)> {
+        self.declared(surface.stage())?;
+        reconstruction::read_grid(self.cache, surface, frame)
+    }
+
+    /// A frame's grid, without its signed distance.
+    pub fn grid_spec(&self, surface: Surface, frame: u32) -> Result<GridSpec> {
+        self.declared(surface.stage())?;
+        reconstruction::read_grid_spec(self.cache, surface, frame)
+    }
+
+    /// The hull's solid on the cones of a frame, given its signed distance `sdf`.
+    pub fn hull_on_cones(&self, frame: u32, sdf: &[f32]) -> Result<Vec<f32>> {
+        self.declared(Surface::Hull.stage())?;
+        reconstruction::read_hull_on_cones(self.cache, frame, sdf)
+    }
+
+    /// A frame's observed surface with its reliability.
+    pub fn observation(&self, frame: u32) -> Result<crate::recon::reliability::Observed> {
+        self.declared(crate::artifacts::observation::STAGE)?;
+        crate::artifacts::observation::read(self.cache, frame)
+    }
+
+    /// The body model.
+    pub fn body_model(&self) -> Result<crate::skeleton::model::BodyModel> {
+        self.declared(crate::artifacts::body_model::STAGE)?;
+        crate::artifacts::body_model::read(self.cache)
+    }
+
+    /// A fitted frame's state (the fit reads its earlier frames).
+    pub fn fitted_state(
+        &self,
+        skeleton: &crate::skeleton::Skeleton,
+        frame: u32,
+    ) -> Result<crate::artifacts::fitted::FitState> {
+        self.declared(crate::artifacts::fitted::STAGE)?;
+        crate::artifacts::fitted::read_state(self.cache, skeleton, frame)
+    }
+
+    /// The frame's images as grey: decoded, or kept from an earlier stage of the frame
+    /// ([`Context::sharing_frame_images`]).
+    pub fn grey_frames(&self, frame: u32) -> Result<Arc<Vec<GreyImage>>> {
+        fn kept(m: &FrameImages) -> std::sync::MutexGuard<'_, HashMap<u32, Arc<Vec<GreyImage>>>> {
+            m.lock().unwrap_or_else(|e| e.into_inner())
+        }
+        if let Some(grey) = self.frame_images.and_then(|m| kept(m).get(&frame).cloned()) {
+            return Ok(grey);
+        }
+        let frames: Vec<image::RgbImage> = (0..self.sequence.cameras.len())
+            .into_par_iter()
+            .map(|c| self.sequence.load_frame(c, frame))
+            .collect::<Result<_>>()?;
+        let grey = Arc::new(crate::photo::grey(&frames));
+        if let Some(m) = self.frame_images {
+            kept(m).insert(frame, grey.clone());
+        }
+        Ok(grey)
+    }
 }
 
 /// Which frames a stage makes artifacts for.
@@ -83,35 +209,119 @@ pub struct StageDef {
     pub scope: Scope,
     /// What it computes, for `--help` and the README.
     pub about: &'static str,
-    /// Upstream stages whose artifacts it reads.
+    /// Upstream stages whose artifacts it reads (through [`Inputs`], which refuses others).
     pub inputs: &'static [&'static str],
     /// Bumped whenever the artifact's format or meaning changes (invalidates caches).
     pub format_version: u32,
-    /// The stage's parameters as canonical text (part of the cache key).
-    pub params: fn(&Config) -> String,
     /// Key material from the raw inputs the stage reads directly for a frame.
     pub sources: fn(&Context, u32, &mut KeyBuilder) -> Result<()>,
-    /// Computes and writes the artifact files of the frames.
+    /// Its settings and its computation.
     pub compute: Compute,
     /// After the stage: writes sequence-level outputs from the frames' artifacts (the
     /// frames in computation order); returns the files and warnings.
     pub finish: Option<FinishFn>,
 }
 
+impl StageDef {
+    /// The stage's resolved settings as canonical text: the key's parameters.
+    pub fn settings_text(&self, config: &Config, sequence: &Sequence) -> Result<String> {
+        match self.compute {
+            Compute::Frame(s) => s.settings_text(config, sequence),
+            Compute::Tracked(s) => s.settings_text(config, sequence),
+        }
+    }
+}
+
 /// How a stage computes its frames' artifacts.
 #[derive(Clone, Copy)]
 pub enum Compute {
     /// Each frame on its own (the runner computes frames side by side).
-    Frame(fn(&Context, u32) -> Result<Output>),
-    /// The frames in order, each from the one before ([`Scope::Tracked`]); the function
-    /// hands each frame's output, and the seconds it took, to the callback (which commits it
-    /// to the cache) as soon as the frame is done.
-    Tracked(TrackedFn),
+    Frame(&'static dyn FrameStage),
+    /// The frames in order, each from the one before ([`Scope::Tracked`]).
+    Tracked(&'static dyn TrackedStage),
 }
 
-/// A [`Compute::Tracked`] stage's computation (given the frames, in computation order).
-pub type TrackedFn =
-    fn(&Context, &[u32], &mut dyn FnMut(u32, Output, f64) -> Result<()>) -> Result<()>;
+/// A frame's computed artifact and the things the user should know about it.
+pub struct Produced {
+    pub artifact: Box<dyn Artifact>,
+    pub warnings: Vec<String>,
+}
+
+impl Produced {
+    pub fn new(artifact: impl Artifact + 'static, warnings: Vec<String>) -> Produced {
+        Produced {
+            artifact: Box::new(artifact),
+            warnings,
+        }
+    }
+}
+
+/// A stage that computes each frame on its own.
+pub trait FrameStage: Sync {
+    /// The settings as canonical text (the key's parameters).
+    fn settings_text(&self, config: &Config, sequence: &Sequence) -> Result<String>;
+    /// Resolves the settings and computes `frame`'s artifact from them and `inputs` alone.
+    fn compute(&self, config: &Config, inputs: &Inputs, frame: u32) -> Result<Produced>;
+}
+
+/// A tracked stage's callback: a frame's artifact and the seconds it took.
+pub type Done<'a> = &'a mut dyn FnMut(u32, Produced, f64) -> Result<()>;
+
+/// A stage that computes its frames in order, each from the one before.
+pub trait TrackedStage: Sync {
+    /// The settings as canonical text (the key's parameters).
+    fn settings_text(&self, config: &Config, sequence: &Sequence) -> Result<String>;
+    /// Resolves the settings and computes `frames` in order from them and `inputs` alone,
+    /// handing each frame's artifact to `done` as soon as it is computed.
+    fn compute(&self, config: &Config, inputs: &Inputs, frames: &[u32], done: Done) -> Result<()>;
+}
+
+/// A per-frame stage made of its settings' resolution and a computation that sees only
+/// them and its inputs.
+pub struct PerFrame<S> {
+    pub resolve: fn(&Config, &Sequence) -> Result<S>,
+    pub compute: fn(&S, &Inputs, u32) -> Result<Produced>,
+}
+
+impl<S: Serialize + Sync> FrameStage for PerFrame<S> {
+    fn settings_text(&self, config: &Config, sequence: &Sequence) -> Result<String> {
+        canonical(&config.path, &(self.resolve)(config, sequence)?)
+    }
+    fn compute(&self, config: &Config, inputs: &Inputs, frame: u32) -> Result<Produced> {
+        (self.compute)(&(self.resolve)(config, inputs.sequence)?, inputs, frame)
+    }
+}
+
+/// A tracked stage made of its settings' resolution and a computation that sees only them
+/// and its inputs.
+pub struct InOrder<S> {
+    pub resolve: fn(&Config, &Sequence) -> Result<S>,
+    pub compute: fn(&S, &Inputs, &[u32], Done) -> Result<()>,
+}
+
+impl<S: Serialize + Sync> TrackedStage for InOrder<S> {
+    fn settings_text(&self, config: &Config, sequence: &Sequence) -> Result<String> {
+        canonical(&config.path, &(self.resolve)(config, sequence)?)
+    }
+    fn compute(&self, config: &Config, inputs: &Inputs, frames: &[u32], done: Done) -> Result<()> {
+        (self.compute)(
+            &(self.resolve)(config, inputs.sequence)?,
+            inputs,
+            frames,
+            done,
+        )
+    }
+}
+
+/// Settings as canonical text (YAML of the struct, fields in declaration order).
+fn canonical(config_path: &Path, settings: &impl Serialize) -> Result<String> {
+    crate::yaml::to_string(settings).map_err(|e| {
+        Error::invalid(
+            config_path,
+            format!("cannot encode a stage's settings for its cache key: {e}"),
+        )
+    })
+}
 
 /// A stage's sequence-level step (given the frames, in computation order).
 pub type FinishFn = fn(&Context, &[u32]) -> Result<Finished>;
@@ -127,15 +337,6 @@ pub struct Finished {
     pub warnings: Vec<String>,
 }
 
-/// What a stage wrote for one frame.
-#[derive(Debug, Default)]
-pub struct Output {
-    /// Files, relative to the stage folder.
-    pub files: Vec<String>,
-    /// Things the user should know (e.g. an empty frame).
-    pub warnings: Vec<String>,
-}
-
 /// All stages, in pipeline order.
 pub const STAGES: &[StageDef] = &[
     StageDef {
@@ -144,9 +345,8 @@ pub const STAGES: &[StageDef] = &[
         about: "foreground masks: given masks, or background subtraction",
         inputs: &[],
         format_version: 1,
-        params: |c| crate::yaml::to_string(&c.silhouette).unwrap_or_default(),
-        sources: silhouette_sources,
-        compute: Compute::Frame(silhouette_compute),
+        sources: silhouette::sources,
+        compute: Compute::Frame(&silhouette::STAGE),
         finish: None,
     },
     StageDef {
@@ -155,20 +355,18 @@ pub const STAGES: &[StageDef] = &[
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
         format_version: 5,
-        params: |c| crate::yaml::to_string(&c.visual_hull).unwrap_or_default(),
-        sources: visual_hull_sources,
-        compute: Compute::Frame(visual_hull_compute),
+        sources: visual_hull::sources,
+        compute: Compute::Frame(&visual_hull::STAGE),
         finish: None,
     },
     StageDef {
         name: "graphcut",
         scope: Scope::PerFrame,
         about: "graph-cut multi-view stereo refinement of the hull",
-        inputs: &["visual_hull"],
+        inputs: &["silhouette", "visual_hull"],
         format_version: 16,
-        params: |c| crate::yaml::to_string(&c.graphcut).unwrap_or_default(),
-        sources: graphcut_sources,
-        compute: Compute::Frame(graphcut_compute),
+        sources: graphcut::sources,
+        compute: Compute::Frame(&graphcut::STAGE),
         finish: None,
     },
     StageDef {
@@ -177,46 +375,28 @@ pub const STAGES: &[StageDef] = &[
         about: "ZNCC photo-consistency and rho_p of every refined surface vertex",
         inputs: &["graphcut"],
         format_version: 2,
-        params: |c| crate::yaml::to_string(&c.reliability).unwrap_or_default(),
-        sources: graphcut_sources,
-        compute: Compute::Frame(reliability_compute),
+        sources: graphcut::sources,
+        compute: Compute::Frame(&reliability::STAGE),
         finish: None,
     },
     StageDef {
         name: "model",
         scope: Scope::Reference,
         about: "skin-bone body model from the reference frame's surface and the skeleton",
-        inputs: &["graphcut"],
+        inputs: &["silhouette", "graphcut"],
         format_version: 2,
-        // The mesh's content is in the key (`model::sources`), its path is not.
-        params: |c| {
-            let mesh = c.model.mesh.is_some().then(|| "given".into());
-            crate::yaml::to_string(&crate::skeleton::model::ModelParams {
-                mesh,
-                ..c.model.clone()
-            })
-            .unwrap_or_default()
-        },
         sources: model::sources,
-        compute: Compute::Frame(model::compute),
+        compute: Compute::Frame(&model::STAGE),
         finish: None,
     },
     StageDef {
         name: "fit",
         scope: Scope::Tracked,
         about: "robust articulated fitting of the body model to every frame, tracked from t0",
-        inputs: &["reliability", "model"],
+        inputs: &["silhouette", "reliability", "model"],
         format_version: 11,
-        // The fit reads the frame rate (the motion prior's weight, the joint-speed check).
-        params: |c| {
-            format!(
-                "{}frame_rate: {:e}\n",
-                crate::yaml::to_string(&c.fit).unwrap_or_default(),
-                c.export.frame_rate
-            )
-        },
         sources: fit::sources,
-        compute: Compute::Tracked(fit::compute),
+        compute: Compute::Tracked(&fit::STAGE),
         finish: Some(fit::finish),
     },
 ];
@@ -232,154 +412,20 @@ pub fn find(name: &str) -> Result<&'static StageDef> {
     })
 }
 
-/// Which silhouette source a sequence uses under `method`.
-fn resolve_method(ctx: &Context) -> Result<SilhouetteMethod> {
-    let seq = ctx.sequence;
-    let method = match ctx.config.silhouette.method {
-        SilhouetteMethod::Auto if seq.has_masks => SilhouetteMethod::Masks,
-        SilhouetteMethod::Auto => SilhouetteMethod::Background,
-        m => m,
-    };
-    match method {
-        SilhouetteMethod::Masks if !seq.has_masks => Err(Error::invalid(
-            seq.dir.join("masks"),
-            "silhouette.method is 'masks' but the sequence has no masks/ folder",
-        )),
-        SilhouetteMethod::Background | SilhouetteMethod::Constant if !seq.has_frames => {
-            Err(Error::invalid(
-                seq.dir.join("frames"),
-                "a masks-only capture (no frames/) takes its silhouettes from masks/; \
-                 set silhouette.method to 'masks' or 'auto'",
-            ))
-        }
-        SilhouetteMethod::Background if !seq.has_backgrounds => Err(Error::invalid(
-            seq.dir.join("background"),
-            "background subtraction needs a plate background/<camera>.png for every camera \
-             (or given masks in masks/<camera>/)",
-        )),
-        m => Ok(m),
-    }
-}
-
-fn silhouette_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result<()> {
-    let seq = ctx.sequence;
-    let method = resolve_method(ctx)?;
-    key.add("method", &format!("{method:?}"));
-    for c in 0..seq.cameras.len() {
-        key.add("camera", &seq.cameras[c].name);
-        match method {
-            SilhouetteMethod::Masks => key.add_file(&seq.mask_path(c, frame))?,
-            SilhouetteMethod::Constant => key.add_file(&seq.frame_path(c, frame))?,
-            _ => key
-                .add_file(&seq.frame_path(c, frame))?
-                .add_file(&seq.background_path(c))?,
-        };
-    }
-    Ok(())
-}
-
-fn silhouette_compute(ctx: &Context, frame: u32) -> Result<Output> {
-    let seq = ctx.sequence;
-    let method = resolve_method(ctx)?;
-    let mut masks = Vec::with_capacity(seq.cameras.len());
-    for c in 0..seq.cameras.len() {
-        let mask = match method {
-            SilhouetteMethod::Masks => {
-                let mask = seq.load_mask(c, frame)?.expect("masks present");
-                let p = &ctx.config.silhouette;
-                if p.clean_given {
-                    silhouette::clean_given(&mask, p)
-                } else {
-                    mask
-                }
-            }
-            SilhouetteMethod::Constant => {
-                silhouette::subtract_constant(&seq.load_frame(c, frame)?, &ctx.config.silhouette)
-            }
-            _ => {
-                let img = seq.load_frame(c, frame)?;
-                let bg = seq.load_background(c)?.expect("plates present");
-                silhouette::subtract_background(&img, &bg, &ctx.config.silhouette)
-            }
-        };
-        masks.push(mask);
-    }
-    let dir = ctx.cache.stage_dir(artifacts::silhouettes::STAGE);
-    Ok(Output {
-        files: artifacts::silhouettes::write(&dir, frame, &seq.cameras, &masks)?,
-        warnings: Vec::new(),
-    })
-}
-
-fn visual_hull_sources(ctx: &Context, _frame: u32, key: &mut KeyBuilder) -> Result<()> {
-    key.add_file(&ctx.config.calibration)?;
-    Ok(())
-}
-
-fn visual_hull_compute(ctx: &Context, frame: u32) -> Result<Output> {
-    let masks = load_silhouettes(ctx, frame)?;
-    let p = &ctx.config.visual_hull;
-    let mut warnings = Vec::new();
-    let coverage = silhouette::Coverage::of(&ctx.sequence.cameras, &masks);
-    let full = coverage.full_problem(frame, p.all_but, ctx.sequence.cameras.len());
-    warnings.extend(full.map_err(|m| Error::invalid(&ctx.sequence.dir, m))?);
-    let hull = visual_hull::reconstruct(&ctx.sequence.cameras, &masks, p).map_err(|m| {
-        Error::invalid(&ctx.config.path, format!("visual_hull, frame {frame}: {m}"))
-    })?;
-    let dir = ctx.cache.stage_dir(Surface::Hull.stage());
-    let mut files = match &hull {
-        Some(h) => {
-            let mut files = reconstruction::write(&dir, frame, &h.mesh, &h.grid, &h.sdf)?;
-            files.push(reconstruction::write_band(&dir, frame, &h.on_cones)?);
-            files
-        }
-        None => {
-            warnings.push(format!(
-                "frame {frame}: the hull is empty: {}",
-                coverage.why_empty()
-            ));
-            let grid = GridSpec {
-                origin: nalgebra::Vector3::zeros(),
-                voxel: p.voxel_size,
-                dims: [0, 0, 0],
-            };
-            let mut files = reconstruction::write(&dir, frame, &TriMesh::default(), &grid, &[])?;
-            files.push(reconstruction::write_band(
-                &dir,
-                frame,
-                &Default::default(),
-            )?);
-            files
-        }
-    };
-    files.sort();
-    Ok(Output { files, warnings })
-}
-
 /// Why `frame`'s hull is empty, from its silhouettes (for the model's and the skeleton's
 /// errors, which meet the empty surface later).
-pub fn why_hull_is_empty(ctx: &Context, frame: u32) -> String {
-    match load_silhouettes(ctx, frame) {
-        Ok(masks) => silhouette::Coverage::of(&ctx.sequence.cameras, &masks).why_empty(),
+pub fn why_hull_is_empty(inputs: &Inputs, frame: u32) -> String {
+    match inputs.silhouettes(frame) {
+        Ok(masks) => {
+            crate::recon::silhouette::Coverage::of(&inputs.sequence.cameras, &masks).why_empty()
+        }
         Err(e) => format!("its silhouettes cannot be read ({e})"),
     }
 }
 
-/// Loads the silhouettes of a frame from the cache (for downstream stages and tests).
+/// Loads the silhouettes of a frame from the cache (for the commands and tests).
 pub fn load_silhouettes(ctx: &Context, frame: u32) -> Result<Vec<image::GrayImage>> {
-    artifacts::silhouettes::read(ctx.cache, frame, &ctx.sequence.cameras)
-}
-
-fn graphcut_sources(ctx: &Context, frame: u32, key: &mut KeyBuilder) -> Result<()> {
-    key.add_file(&ctx.config.calibration)?;
-    if !ctx.sequence.has_frames {
-        key.add("frames", "none (masks only)");
-        return Ok(());
-    }
-    for c in 0..ctx.sequence.cameras.len() {
-        key.add_file(&ctx.sequence.frame_path(c, frame))?;
-    }
-    Ok(())
+    crate::artifacts::silhouettes::read(ctx.cache, frame, &ctx.sequence.cameras)
 }
 
 /// What the graph cut does on a masks-only capture.
@@ -395,7 +441,7 @@ pub const MASKS_ONLY_RELIABILITY: &str =
 /// What each stage will do on this capture and why, one line per stage (`pipeline check`).
 pub fn plan_notes(ctx: &Context) -> Result<Vec<String>> {
     let seq = ctx.sequence;
-    let silhouette = match resolve_method(ctx)? {
+    let silhouette = match silhouette::resolve_method(ctx.config, seq)? {
         SilhouetteMethod::Masks if ctx.config.silhouette.clean_given => {
             "the given masks (masks/), cleaned (silhouette.clean_given)"
         }
@@ -442,117 +488,4 @@ pub fn plan_notes(ctx: &Context) -> Result<Vec<String>> {
             }
         ),
     ])
-}
-
-/// The frame's images as grey: decoded, or kept from an earlier stage of the frame
-/// ([`Context::sharing_frame_images`]).
-fn grey_frames(ctx: &Context, frame: u32) -> Result<Arc<Vec<GreyImage>>> {
-    fn kept(m: &FrameImages) -> std::sync::MutexGuard<'_, HashMap<u32, Arc<Vec<GreyImage>>>> {
-        m.lock().unwrap_or_else(|e| e.into_inner())
-    }
-    if let Some(grey) = ctx
-        .frame_images
-        .as_ref()
-        .and_then(|m| kept(m).get(&frame).cloned())
-    {
-        return Ok(grey);
-    }
-    let frames: Vec<image::RgbImage> = (0..ctx.sequence.cameras.len())
-        .into_par_iter()
-        .map(|c| ctx.sequence.load_frame(c, frame))
-        .collect::<Result<_>>()?;
-    let grey = Arc::new(crate::photo::grey(&frames));
-    if let Some(m) = &ctx.frame_images {
-        kept(m).insert(frame, grey.clone());
-    }
-    Ok(grey)
-}
-
-fn reliability_compute(ctx: &Context, frame: u32) -> Result<Output> {
-    let p = &ctx.config.reliability;
-    let grid = reconstruction::read_grid_spec(ctx.cache, Surface::Refined, frame)?;
-    let mesh = reconstruction::read_mesh(ctx.cache, Surface::Refined, frame)?;
-    let mut warnings = Vec::new();
-    let observed = if mesh.vertices.is_empty() {
-        warnings.push(format!("frame {frame}: the refined surface is empty"));
-        reliability::Observed::default()
-    } else if !ctx.sequence.has_frames {
-        warnings.push(format!("reliability: {MASKS_ONLY_RELIABILITY}"));
-        reliability::Observed::unweighted(&mesh)
-    } else {
-        let images = grey_frames(ctx, frame)?;
-        reliability::observe(&ctx.sequence.cameras, &images, &mesh, grid.voxel, p)
-    };
-    let dir = ctx.cache.stage_dir(artifacts::observation::STAGE);
-    let files = artifacts::observation::write(&dir, frame, &mesh, &observed, p)?;
-    Ok(Output { files, warnings })
-}
-
-fn graphcut_compute(ctx: &Context, frame: u32) -> Result<Output> {
-    let p = &ctx.config.graphcut;
-    let (grid, sdf) = reconstruction::read_grid(ctx.cache, Surface::Hull, frame)?;
-    let dir = ctx.cache.stage_dir(Surface::Refined.stage());
-    let occupied: Vec<bool> = sdf.iter().map(|&v| v < 0.0).collect();
-    if !occupied.iter().any(|&o| o) {
-        // An empty hull stays empty.
-        let warning = format!("frame {frame}: the hull is empty");
-        return Ok(Output {
-            files: reconstruction::write(&dir, frame, &TriMesh::default(), &grid, &sdf)?,
-            warnings: vec![warning],
-        });
-    }
-    if !ctx.sequence.has_frames {
-        // Nothing to refine with: the hull passes through unchanged.
-        let mesh = reconstruction::read_mesh(ctx.cache, Surface::Hull, frame)?;
-        return Ok(Output {
-            files: reconstruction::write(&dir, frame, &mesh, &grid, &sdf)?,
-            warnings: vec![format!("graphcut: {MASKS_ONLY_GRAPHCUT}")],
-        });
-    }
-    let hull = reconstruction::read_mesh(ctx.cache, Surface::Hull, frame)?;
-    let cams = &ctx.sequence.cameras;
-    let depth = crate::photo::depth_maps(cams, &hull);
-    let images = grey_frames(ctx, frame)?;
-    // Long cuts report their progress (drawn only when stderr is a terminal).
-    let spinner = indicatif::ProgressBar::new_spinner();
-    let mut report = |flow: f64, augmentations: u64| {
-        spinner.set_message(format!(
-            "frame {frame}: max-flow {flow:.3e} after {augmentations} augmentations"
-        ));
-        spinner.tick();
-    };
-    // The silhouettes pin the rims; nothing else in the cut reads them.
-    let masks = if p.pin_rims {
-        load_silhouettes(ctx, frame)?
-    } else {
-        Vec::new()
-    };
-    let refined = graphcut::refine(
-        &grid,
-        &occupied,
-        &sdf,
-        cams,
-        &images,
-        &depth,
-        &masks,
-        p,
-        &mut report,
-    );
-    spinner.finish_and_clear();
-    let hull_on_cones = reconstruction::read_hull_on_cones(ctx.cache, frame, &sdf)?;
-    let (refined_sdf, mut mesh) =
-        graphcut::mesh(&grid, &refined, &hull_on_cones, p.smoothing_iterations);
-    if p.photo_refine > 0.0 {
-        use crate::photo::refine::{refine_along_normals, RefineSettings};
-        let settings = RefineSettings::with_search(p.photo_refine);
-        let smoothed: Vec<GreyImage> = images
-            .par_iter()
-            .map(|g| g.blurred(settings.image_sigma))
-            .collect();
-        refine_along_normals(cams, &smoothed, &mut mesh, grid.voxel, &settings);
-    }
-    Ok(Output {
-        files: reconstruction::write(&dir, frame, &mesh, &grid, &refined_sdf)?,
-        warnings: Vec::new(),
-    })
 }
