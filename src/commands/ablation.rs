@@ -29,6 +29,7 @@ pub fn ablation(job: &Job) -> Result<()> {
     let truth = job.sequence.ground_truth_joints()?;
     let truth_path = job.sequence.dir.join("ground_truth/joints.csv");
     let dir = job.config.output.join("ablation");
+    let model = crate::artifacts::body_model::read(&job.cache)?;
     let mut errors = Vec::new();
     for method in Method::ALL {
         let t = std::time::Instant::now();
@@ -40,7 +41,6 @@ pub fn ablation(job: &Job) -> Result<()> {
         let results =
             crate::stages::fit::track_in_memory(&ctx, &tracked, &params, &|_| bar.inc(1))?.results;
         bar.finish_and_clear();
-        let model = crate::artifacts::body_model::read(&job.cache)?;
         let rows: Vec<_> = results
             .iter()
             .flat_map(|(f, r)| crate::stages::fit::joint_rows(&model.skeleton, *f, &r.pose))
