@@ -154,7 +154,7 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
                 least_seen_joint: views.into_iter().min_by_key(|v| v.1).unwrap_or_default(),
             })
         }
-        Err(m) => Err(m),
+        Err(m) => Err(m.0),
     };
     Ok(Tried { frame, outcome })
 }

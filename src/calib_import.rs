@@ -15,6 +15,7 @@
 //!   COLMAP's minus 0.5.
 
 use crate::camera::{check_name, Camera};
+use crate::error::Refusal;
 use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3};
 use serde::Deserialize;
@@ -310,15 +311,12 @@ fn revalidate(source: &Path, cameras: Vec<Camera>, warnings: Vec<String>) -> Res
 type ColmapIntrinsics = (f64, f64, f64, f64, [f64; 5]);
 
 /// Converts one `cameras.txt` model and its parameters.
-fn colmap_intrinsics(model: &str, p: &[f64]) -> std::result::Result<ColmapIntrinsics, String> {
-    let need = |n: usize| -> std::result::Result<(), String> {
+fn colmap_intrinsics(model: &str, p: &[f64]) -> std::result::Result<ColmapIntrinsics, Refusal> {
+    let need = |n: usize| -> std::result::Result<(), Refusal> {
         if p.len() == n {
             Ok(())
         } else {
-            Err(format!(
-                "model {model} takes {n} parameters, found {}",
-                p.len()
-            ))
+            Err(format!("model {model} takes {n} parameters, found {}", p.len()).into())
         }
     };
     Ok(match model {
@@ -356,7 +354,8 @@ fn colmap_intrinsics(model: &str, p: &[f64]) -> std::result::Result<ColmapIntrin
             return Err(format!(
                 "camera model {other} is not supported; use SIMPLE_PINHOLE, PINHOLE, \
                  SIMPLE_RADIAL, RADIAL, OPENCV or FULL_OPENCV"
-            ))
+            )
+            .into())
         }
     })
 }
@@ -414,7 +413,7 @@ pub fn from_colmap(dir: &Path) -> Result<Imported> {
             .map(|s| s.parse::<f64>().ok().filter(|v| v.is_finite()))
             .collect::<Option<_>>()
             .ok_or_else(|| bad("a parameter is not a finite number".into()))?;
-        let k = colmap_intrinsics(f[1], &params).map_err(bad)?;
+        let k = colmap_intrinsics(f[1], &params).map_err(|m| bad(m.0))?;
         if intrinsics.insert(id, (w, h, k)).is_some() {
             return Err(bad(format!("camera id {id} is listed twice")));
         }
@@ -497,13 +496,13 @@ pub fn from_colmap(dir: &Path) -> Result<Imported> {
 }
 
 /// Parses `WxH` (e.g. `1920x1080`).
-pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+pub fn parse_size(s: &str) -> std::result::Result<(u32, u32), Refusal> {
     let err = || format!("'{s}' is not an image size; write WIDTHxHEIGHT, e.g. 1920x1080");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(err)?;
     let w: u32 = w.trim().parse().map_err(|_| err())?;
     let h: u32 = h.trim().parse().map_err(|_| err())?;
     if w == 0 || h == 0 {
-        return Err(err());
+        return Err(err().into());
     }
     Ok((w, h))
 }

@@ -7,6 +7,7 @@
 //! coordinates (the top-left pixel's centre is (0, 0)); the camera looks along +z, image x
 //! goes right and y goes down.
 
+use crate::error::Refusal;
 use crate::error::{Error, Result};
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 use serde::Deserialize;
@@ -281,12 +282,11 @@ impl Camera {
     }
 
     /// Checks the values a calibration must satisfy; the message names what is wrong.
-    pub fn validate(&self) -> std::result::Result<(), String> {
+    pub fn validate(&self) -> std::result::Result<(), Refusal> {
         if self.width == 0 || self.height == 0 {
-            return Err(format!(
-                "image size {}x{} must be positive",
-                self.width, self.height
-            ));
+            return Err(
+                format!("image size {}x{} must be positive", self.width, self.height).into(),
+            );
         }
         let numbers = [self.fx, self.fy, self.cx, self.cy, self.skew]
             .into_iter()
@@ -300,7 +300,8 @@ impl Camera {
             return Err(format!(
                 "focal lengths must be positive (fx = {}, fy = {})",
                 self.fx, self.fy
-            ));
+            )
+            .into());
         }
         // Plausible ranges: absurd numbers pass every other test and make a camera that
         // silently sees nothing.
@@ -310,14 +311,16 @@ impl Camera {
                 return Err(format!(
                     "{what} = {f} pixels is outside 0.001 to 1000 times the image's longer side \
                      ({side} pixels); focal lengths are in pixels"
-                ));
+                )
+                .into());
             }
         }
         if self.skew.abs() > self.fx.max(self.fy) {
             return Err(format!(
                 "the skew K[0][1] = {} is larger than the focal length; it is 0 for most cameras",
                 self.skew
-            ));
+            )
+            .into());
         }
         let (w, h) = (self.width as f64, self.height as f64);
         if !(-w..=2.0 * w).contains(&self.cx) || !(-h..=2.0 * h).contains(&self.cy) {
@@ -325,20 +328,23 @@ impl Camera {
                 "the principal point ({}, {}) lies far outside the {}x{} image (it is near the \
                  image centre for most cameras)",
                 self.cx, self.cy, self.width, self.height
-            ));
+            )
+            .into());
         }
         if self.t.norm() > MAX_TRANSLATION {
             return Err(format!(
                 "|t| = {:.0} is over {MAX_TRANSLATION} m: t is in metres (millimetres would be \
                  1000 times too large)",
                 self.t.norm()
-            ));
+            )
+            .into());
         }
         if self.dist.iter().any(|d| d.abs() > 1e3) {
             return Err(format!(
                 "dist {:?} holds a coefficient over 1000 in size; expected [k1, k2, p1, p2, k3]",
                 self.dist
-            ));
+            )
+            .into());
         }
         if let Some(r) = self.fold_radius() {
             return Err(format!(
@@ -347,7 +353,8 @@ impl Camera {
                  pixel; check the coefficients and their order [k1, k2, p1, p2, k3]",
                 self.dist,
                 r * self.fx.min(self.fy)
-            ));
+            )
+            .into());
         }
         let ortho = (self.r * self.r.transpose() - Matrix3::identity())
             .abs()
@@ -358,7 +365,8 @@ impl Camera {
                 "R is not a rotation: |R·Rᵀ - I| = {ortho:.3e} and det R = {det:.9} \
                  (need R orthonormal with det +1 within {ROTATION_TOLERANCE:e}); \
                  check that R is the world-to-camera rotation matrix, row by row"
-            ));
+            )
+            .into());
         }
         Ok(())
     }
@@ -399,7 +407,7 @@ fn invisible(c: char) -> bool {
 }
 
 /// Camera names become folder names: refuse anything that is not a plain file name.
-pub fn check_name(name: &str) -> std::result::Result<(), String> {
+pub fn check_name(name: &str) -> std::result::Result<(), Refusal> {
     if name.is_empty() {
         return Err("the name is empty".into());
     }
@@ -408,10 +416,10 @@ pub fn check_name(name: &str) -> std::result::Result<(), String> {
     if name == "." || name == ".." || name.contains(['/', '\\']) {
         return Err(format!(
             "the name '{shown}' is used as a folder name and must not contain '/', '\\' or be '.' or '..'"
-        ));
+        ).into());
     }
     if name.chars().any(|c| c.is_control()) {
-        return Err(format!("the name {name:?} contains control characters"));
+        return Err(format!("the name {name:?} contains control characters").into());
     }
     // Invisible or reordering characters make two names look alike, or a name look like
     // another (U+202E shows the rest of a line backwards).
@@ -420,12 +428,13 @@ pub fn check_name(name: &str) -> std::result::Result<(), String> {
             "the name {:?} contains the invisible character U+{:04X}; use letters, digits, '_' \
              and '-'",
             name, c as u32
-        ));
+        )
+        .into());
     }
     if name.trim() != name || name.trim().is_empty() {
-        return Err(format!(
-            "the name {name:?} is blank or starts or ends with white space"
-        ));
+        return Err(
+            format!("the name {name:?} is blank or starts or ends with white space").into(),
+        );
     }
     // Names become file names (`<name>.png`, `<name>.tmp-...`): well under the usual
     // 255-byte limit.
@@ -434,7 +443,7 @@ pub fn check_name(name: &str) -> std::result::Result<(), String> {
             "the name '{}...' is {} bytes long; names become file names, keep them to {MAX_NAME_BYTES} bytes",
             shown.to_string().chars().take(20).collect::<String>(),
             name.len()
-        ));
+        ).into());
     }
     Ok(())
 }
@@ -473,7 +482,7 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
         let bad = |msg: String| {
             Error::invalid(path, format!("camera '{}': {msg}", e.name.escape_debug()))
         };
-        check_name(&e.name).map_err(&bad)?;
+        check_name(&e.name).map_err(|m| bad(m.0))?;
         // Names become folder names: on a case-insensitive filesystem "Cam0" and "cam0"
         // would be one folder.
         if !seen.insert(e.name.to_lowercase()) {
@@ -526,7 +535,7 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
                 e.name
             ));
         }
-        cam.validate().map_err(&bad)?;
+        cam.validate().map_err(|m| bad(m.0))?;
         // A copied entry adds nothing and may hide a missing camera; a warning, not an
         // error: real rings hold such pairs (the Middlebury temple ring's 1st and 11th).
         let pose: Vec<u64> = cam
@@ -612,7 +621,7 @@ pub fn common_target(cams: &[Camera]) -> Option<Vector3<f64>> {
 /// ([`common_target`]): it faces away from it, or it projects more than an image's size
 /// outside its image (a camera turned around, or with R and t of another convention). The
 /// message names the camera.
-pub fn check_cameras_look_at_the_scene(cams: &[Camera]) -> std::result::Result<(), String> {
+pub fn check_cameras_look_at_the_scene(cams: &[Camera]) -> std::result::Result<(), Refusal> {
     if cams.len() < 3 {
         return Ok(());
     }
@@ -627,7 +636,8 @@ pub fn check_cameras_look_at_the_scene(cams: &[Camera]) -> std::result::Result<(
                 "camera '{}' faces away from the point the cameras look at, {shown}: it sees \
                  none of the subject; check its R and t (world-to-camera), or remove it",
                 c.name
-            ));
+            )
+            .into());
         }
         // Without the lens distortion: the point may lie far outside the image.
         let (w, h) = (c.width as f64, c.height as f64);
@@ -638,7 +648,8 @@ pub fn check_cameras_look_at_the_scene(cams: &[Camera]) -> std::result::Result<(
                 "camera '{}' does not see the point the cameras look at, {shown} (it would be at \
                  pixel ({u:.0}, {v:.0}) of a {}x{} image); check its K, R and t, or remove it",
                 c.name, c.width, c.height
-            ));
+            )
+            .into());
         }
     }
     Ok(())

@@ -1,6 +1,7 @@
 //! `pipeline.yaml`: what to process and where results go. Paths are relative to the YAML
 //! file. Unknown keys and wrong types are errors naming the key and the line.
 
+use crate::error::Refusal;
 use crate::error::{Error, Result};
 use crate::fit::FitParams;
 use crate::geometry::axes::{RotationOrder, UpAxis};
@@ -21,7 +22,7 @@ pub struct FrameRange {
 
 impl FrameRange {
     /// Parses `A..B` (inclusive at both ends) or a single frame `A`.
-    pub fn parse(s: &str) -> std::result::Result<FrameRange, String> {
+    pub fn parse(s: &str) -> std::result::Result<FrameRange, Refusal> {
         let err =
             || format!("'{s}' is not a frame range; write A..B (inclusive) or a single frame A");
         let (a, b) = match s.split_once("..") {
@@ -31,7 +32,7 @@ impl FrameRange {
         let first: u32 = a.parse().map_err(|_| err())?;
         let last: u32 = b.parse().map_err(|_| err())?;
         if last < first {
-            return Err(format!("frame range '{s}' ends before it starts"));
+            return Err(format!("frame range '{s}' ends before it starts").into());
         }
         Ok(FrameRange { first, last })
     }
@@ -288,12 +289,13 @@ impl Default for ExportParams {
 }
 
 /// Checks the parameters; the message names the key.
-pub fn validate_export(p: &ExportParams) -> std::result::Result<(), String> {
+pub fn validate_export(p: &ExportParams) -> std::result::Result<(), Refusal> {
     if !(p.frame_rate.is_finite() && p.frame_rate > 0.0) {
         return Err(format!(
             "key 'export.frame_rate': {} is not a positive number of frames per second",
             p.frame_rate
-        ));
+        )
+        .into());
     }
     RotationOrder::parse(&p.bvh_rotation_order)
         .map_err(|m| format!("key 'export.bvh_rotation_order': {m}"))?;

@@ -37,3 +37,35 @@ impl Error {
         }
     }
 }
+
+/// What a core algorithm or check refuses, in words a user can act on (the bad value and
+/// the fix). It names no file: the caller knows which file or key the value came from and
+/// attaches it ([`Error::invalid`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Refusal(pub String);
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Refusal {}
+
+impl From<String> for Refusal {
+    fn from(m: String) -> Refusal {
+        Refusal(m)
+    }
+}
+
+impl From<&str> for Refusal {
+    fn from(m: &str) -> Refusal {
+        Refusal(m.to_string())
+    }
+}
+
+impl From<Refusal> for String {
+    fn from(r: Refusal) -> String {
+        r.0
+    }
+}

@@ -2,6 +2,7 @@
 //! instead of exhausting memory. Each cap has a default and an environment variable to raise
 //! it (the error names the variable).
 
+use crate::error::Refusal;
 use crate::error::{Error, Result};
 use std::path::Path;
 
@@ -180,12 +181,13 @@ pub fn image_alloc_bytes() -> Result<u64> {
 pub const MAX_SMOOTHING_ITERATIONS: usize = 1000;
 
 /// Refuses a smoothing iteration count (`key` names it) above [`MAX_SMOOTHING_ITERATIONS`].
-pub fn check_smoothing(key: &str, iterations: usize) -> std::result::Result<(), String> {
+pub fn check_smoothing(key: &str, iterations: usize) -> std::result::Result<(), Refusal> {
     if iterations > MAX_SMOOTHING_ITERATIONS {
         return Err(format!(
             "{key} = {iterations} is over {MAX_SMOOTHING_ITERATIONS}; 10 (the default) suits \
              most captures"
-        ));
+        )
+        .into());
     }
     Ok(())
 }

@@ -309,22 +309,22 @@ enum BenchWhat {
 }
 
 /// A count from `MIN` to `MAX` (bench sizes: beyond them a run would exhaust memory).
-fn count<const MIN: usize, const MAX: usize>(s: &str) -> Result<usize, String> {
+fn count<const MIN: usize, const MAX: usize>(s: &str) -> Result<usize, hullpose::error::Refusal> {
     let n: usize = s
         .trim()
         .parse()
         .map_err(|_| format!("'{s}' is not a whole number"))?;
     if !(MIN..=MAX).contains(&n) {
-        return Err(format!("{n} is outside {MIN}..={MAX}"));
+        return Err(format!("{n} is outside {MIN}..={MAX}").into());
     }
     Ok(n)
 }
 
-fn parse_range(s: &str) -> Result<FrameRange, String> {
+fn parse_range(s: &str) -> Result<FrameRange, hullpose::error::Refusal> {
     FrameRange::parse(s)
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+fn run(cli: Cli) -> hullpose::Result<()> {
     match cli.command {
         Command::Run {
             file,
@@ -415,7 +415,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 time,
                 cpus,
                 mem_mb: mem,
-                program: std::env::current_exe()?,
+                program: std::env::current_exe().map_err(|e| {
+                    hullpose::Error::Usage(format!("cannot find this program's own path: {e}"))
+                })?,
             };
             let plan = hullpose::slurm::plan(&job, &opts)?;
             let (array, last) = hullpose::slurm::write(&plan)?;
@@ -601,14 +603,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 }
                 (CalibSource::Colmap, [dir]) => hullpose::calib_import::from_colmap(dir)?,
                 (CalibSource::Opencv, _) => {
-                    anyhow::bail!(
-                        "--from opencv takes two files: INTRI EXTRI (intri.yml extri.yml)"
-                    )
+                    return Err(hullpose::Error::Usage(
+                        "--from opencv takes two files: INTRI EXTRI (intri.yml extri.yml)".into(),
+                    ))
                 }
                 (CalibSource::Colmap, _) => {
-                    anyhow::bail!(
-                        "--from colmap takes one folder holding cameras.txt and images.txt"
-                    )
+                    return Err(hullpose::Error::Usage(
+                        "--from colmap takes one folder holding cameras.txt and images.txt".into(),
+                    ))
                 }
             };
             for w in &imported.warnings {
@@ -725,7 +727,7 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {e}");
             ExitCode::FAILURE
         }
     }

@@ -3,6 +3,7 @@
 //! weight, the sampling, when the rounds stop and when a lost fit is restarted.
 
 use super::contact::ContactParams;
+use crate::error::Refusal;
 use serde::{Deserialize, Serialize};
 
 /// Which weights the energy uses: the paper's method and the baselines it compares with.
@@ -250,7 +251,7 @@ impl FitParams {
 }
 
 /// Checks parameters that do not depend on the data.
-pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
+pub fn validate(p: &FitParams) -> std::result::Result<(), Refusal> {
     let positive = |v: f64| v > 0.0 && v.is_finite();
     let c = &p.contact;
     if !positive(c.alpha_c) || !positive(c.tau_c) || !positive(c.rest_distance) {
@@ -262,7 +263,8 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         return Err(format!(
             "fit.normal_angle_deg must be in (0, 180] degrees, got {}",
             p.normal_angle_deg
-        ));
+        )
+        .into());
     }
     let s = &p.stop;
     if s.max_rounds == 0 || s.baseline_max_rounds == 0 || p.restart.rounds_factor == 0 {
@@ -278,7 +280,8 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         if !(spacing >= 0.0 && spacing.is_finite()) {
             return Err(format!(
                 "fit.{key} must be 0 (every vertex) or a spacing in metres, got {spacing}"
-            ));
+            )
+            .into());
         }
     }
     for (key, tolerance) in [
@@ -288,7 +291,8 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         if !positive(tolerance) {
             return Err(format!(
                 "fit.stop.{key} must be a positive distance in metres, got {tolerance}"
-            ));
+            )
+            .into());
         }
     }
     let h = &p.health;
@@ -296,20 +300,22 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
         return Err(format!(
             "fit.motion_prior_acceleration must be a number of m/s^2, 0 or more (0: no motion prior), got {}",
             p.motion_prior_acceleration
-        ));
+        ).into());
     }
     if !(h.iou_drift > 0.0 && h.iou_drift <= 1.0) {
         return Err(format!(
             "fit.health.iou_drift must be a share in (0, 1], got {}",
             h.iou_drift
-        ));
+        )
+        .into());
     }
     if !(positive(h.max_joint_speed) && h.iou_drop > 0.0 && h.iou_drop <= 1.0) {
         return Err(format!(
             "fit.health: max_joint_speed must be a positive number of metres per second and \
              iou_drop a share in (0, 1], got {} and {}",
             h.max_joint_speed, h.iou_drop
-        ));
+        )
+        .into());
     }
     let energy_jump_ok = h.energy_jump.is_finite() && h.energy_jump >= 1.0;
     if !(positive(h.unexplained_cm2) && positive(h.interpenetration_cm) && energy_jump_ok) {
@@ -317,26 +323,30 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), String> {
             "fit.health: unexplained_cm2 must be a positive area in cm^2, interpenetration_cm a \
              positive depth in cm and energy_jump a ratio >= 1, got {}, {} and {}",
             h.unexplained_cm2, h.interpenetration_cm, h.energy_jump
-        ));
+        )
+        .into());
     }
     let r = &p.restart;
     if !(r.energy_ratio.is_finite() && r.energy_ratio >= 1.0) {
         return Err(format!(
             "fit.restart.energy_ratio must be a number >= 1, got {}",
             r.energy_ratio
-        ));
+        )
+        .into());
     }
     if !(r.turn_deg > 0.0 && r.turn_deg <= 180.0) {
         return Err(format!(
             "fit.restart.turn_deg must be in (0, 180] degrees, got {}",
             r.turn_deg
-        ));
+        )
+        .into());
     }
     if !(0.0..1.0).contains(&p.min_observed_share) {
         return Err(format!(
             "fit.min_observed_share must be in [0, 1), got {}",
             p.min_observed_share
-        ));
+        )
+        .into());
     }
     Ok(())
 }

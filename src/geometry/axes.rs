@@ -3,6 +3,7 @@
 //! pipeline.yaml names it (`export.up_axis`), exports turn the world by the proper rotation
 //! that takes it to +Y.
 
+use crate::error::Refusal;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -19,8 +20,8 @@ pub enum UpAxis {
 }
 
 impl TryFrom<String> for UpAxis {
-    type Error = String;
-    fn try_from(s: String) -> Result<Self, String> {
+    type Error = Refusal;
+    fn try_from(s: String) -> Result<Self, Refusal> {
         Ok(match s.trim() {
             "+x" | "x" | "+X" | "X" => UpAxis::PlusX,
             "-x" | "-X" => UpAxis::MinusX,
@@ -29,9 +30,9 @@ impl TryFrom<String> for UpAxis {
             "+z" | "z" | "+Z" | "Z" => UpAxis::PlusZ,
             "-z" | "-Z" => UpAxis::MinusZ,
             other => {
-                return Err(format!(
-                    "'{other}' is not an axis; use +x, -x, +y, -y, +z or -z"
-                ))
+                return Err(
+                    format!("'{other}' is not an axis; use +x, -x, +y, -y, +z or -z").into(),
+                )
             }
         })
     }
@@ -85,7 +86,7 @@ pub struct RotationOrder(pub [usize; 3]);
 
 impl RotationOrder {
     /// Parses `XYZ`, `ZXY`, ... (any permutation of X, Y, Z).
-    pub fn parse(s: &str) -> Result<RotationOrder, String> {
+    pub fn parse(s: &str) -> Result<RotationOrder, Refusal> {
         let axes: Vec<usize> = s
             .trim()
             .chars()
@@ -98,9 +99,7 @@ impl RotationOrder {
             .collect::<Option<_>>()
             .ok_or_else(|| format!("'{s}' is not a rotation order such as ZXY"))?;
         if axes.len() != 3 || axes[0] == axes[1] || axes[1] == axes[2] || axes[0] == axes[2] {
-            return Err(format!(
-                "'{s}' must name each of X, Y and Z once (e.g. ZXY, XYZ)"
-            ));
+            return Err(format!("'{s}' must name each of X, Y and Z once (e.g. ZXY, XYZ)").into());
         }
         Ok(RotationOrder([axes[0], axes[1], axes[2]]))
     }

@@ -43,6 +43,7 @@
 //!   phantom volume stays, for stage 4 to flag).
 
 use crate::camera::Camera;
+use crate::error::Refusal;
 use crate::geometry::grid::{GridSpec, FACE_OFFSETS};
 use crate::geometry::TriMesh;
 use crate::maxflow::GridGraph;
@@ -111,24 +112,27 @@ impl Default for GraphcutParams {
 }
 
 /// Checks parameters that do not depend on the data.
-pub fn validate(p: &GraphcutParams) -> std::result::Result<(), String> {
+pub fn validate(p: &GraphcutParams) -> std::result::Result<(), Refusal> {
     if !(p.band > 0.0 && p.band.is_finite()) {
         return Err(format!(
             "graphcut.band must be a positive thickness in metres, got {}",
             p.band
-        ));
+        )
+        .into());
     }
     if p.window < 3 || p.window.is_multiple_of(2) || p.window > 31 {
         return Err(format!(
             "graphcut.window must be an odd number of pixels from 3 to 31, got {}",
             p.window
-        ));
+        )
+        .into());
     }
     if !(0.0..=3.0).contains(&p.photo_refine) {
         return Err(format!(
             "graphcut.photo_refine must lie in [0, 3] voxels (0: off), got {}",
             p.photo_refine
-        ));
+        )
+        .into());
     }
     if p.sigma.is_nan()
         || p.sigma <= 0.0

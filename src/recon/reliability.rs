@@ -19,6 +19,7 @@
 //! product.
 
 use crate::camera::Camera;
+use crate::error::Refusal;
 use crate::geometry::TriMesh;
 use crate::photo::{depth_maps, mean_pair_zncc, GreyImage, Visibility};
 use nalgebra::Vector3;
@@ -77,12 +78,13 @@ impl Default for ReliabilityParams {
 }
 
 /// Checks parameters that do not depend on the data.
-pub fn validate(p: &ReliabilityParams) -> std::result::Result<(), String> {
+pub fn validate(p: &ReliabilityParams) -> std::result::Result<(), Refusal> {
     if p.window < 3 || p.window.is_multiple_of(2) || p.window > 31 {
         return Err(format!(
             "reliability.window must be an odd number of samples from 3 to 31, got {}",
             p.window
-        ));
+        )
+        .into());
     }
     let positive = |v: f64| v > 0.0 && v.is_finite();
     if !positive(p.patch_spacing) || !positive(p.depth_tolerance) || !positive(p.alpha_p) {
@@ -95,7 +97,8 @@ pub fn validate(p: &ReliabilityParams) -> std::result::Result<(), String> {
         return Err(format!(
             "reliability.max_view_angle_deg must lie in (0, 90], got {}",
             p.max_view_angle_deg
-        ));
+        )
+        .into());
     }
     let in_range = |v: f64| (0.0..=10.0).contains(&v);
     if !in_range(p.image_sigma) || !in_range(p.normal_search) {

@@ -19,6 +19,7 @@
 //! ([`ConeBand`]) are kept for the graph-cut stage.
 
 use crate::camera::Camera;
+use crate::error::Refusal;
 use crate::geometry::cone_distance::ConeDistance;
 use crate::geometry::distance::signed_distance;
 use crate::geometry::grid::GridSpec;
@@ -430,7 +431,7 @@ pub fn box_blur_3d(grid: &GridSpec, values: &[f32]) -> Vec<f32> {
 }
 
 /// Checks the memory a grid needs against the cap.
-pub fn check_memory(grid: &GridSpec, p: &VisualHullParams) -> std::result::Result<(), String> {
+pub fn check_memory(grid: &GridSpec, p: &VisualHullParams) -> std::result::Result<(), Refusal> {
     // In floating point: the product of absurd dimensions overflows an integer.
     let voxels: f64 = grid.dims.iter().map(|&d| d as f64).product();
     let mb = voxels * BYTES_PER_VOXEL / 1e6;
@@ -439,25 +440,27 @@ pub fn check_memory(grid: &GridSpec, p: &VisualHullParams) -> std::result::Resul
             "the grid of {}x{}x{} voxels of {} m needs about {mb:.0} MB, over visual_hull.memory_cap_mb = {}; \
              use a larger voxel_size, a tighter bbox, or raise the cap",
             grid.dims[0], grid.dims[1], grid.dims[2], grid.voxel, p.memory_cap_mb
-        ));
+        ).into());
     }
     Ok(())
 }
 
 /// Checks parameters that do not depend on the data.
-pub fn validate(p: &VisualHullParams) -> std::result::Result<(), String> {
+pub fn validate(p: &VisualHullParams) -> std::result::Result<(), Refusal> {
     if !(p.voxel_size > 0.0 && p.voxel_size.is_finite()) {
         return Err(format!(
             "visual_hull.voxel_size must be a positive length in metres, got {}",
             p.voxel_size
-        ));
+        )
+        .into());
     }
     if let Some(b) = &p.bbox {
         if (0..3).any(|a| b.min[a] >= b.max[a] || !b.min[a].is_finite() || !b.max[a].is_finite()) {
             return Err(format!(
                 "visual_hull.bbox: min {:?} must be below max {:?} on every axis",
                 b.min, b.max
-            ));
+            )
+            .into());
         }
     }
     if p.voxel_size > MAX_VOXEL_SIZE {
@@ -465,19 +468,22 @@ pub fn validate(p: &VisualHullParams) -> std::result::Result<(), String> {
             "visual_hull.voxel_size {} m is larger than {MAX_VOXEL_SIZE} m: a person 1.7 m tall \
              would be a handful of voxels; use 0.005 to 0.02 for a body",
             p.voxel_size
-        ));
+        )
+        .into());
     }
     if !(p.margin >= 0.0 && p.margin <= 10.0) {
         return Err(format!(
             "visual_hull.margin must be a length from 0 to 10 m, got {}",
             p.margin
-        ));
+        )
+        .into());
     }
     if !(p.memory_cap_mb > 0.0 && p.memory_cap_mb.is_finite()) {
         return Err(format!(
             "visual_hull.memory_cap_mb must be a positive number of MB, got {}",
             p.memory_cap_mb
-        ));
+        )
+        .into());
     }
     crate::limits::check_smoothing("visual_hull.smoothing_iterations", p.smoothing_iterations)?;
     if let Some(b) = &p.bbox {
@@ -496,14 +502,15 @@ pub const MIN_VOXELS_ACROSS: usize = 12;
 
 /// Refuses a grid too coarse to hold a shape (fewer than [`MIN_VOXELS_ACROSS`] voxels
 /// along its longest side).
-pub fn check_resolution(grid: &GridSpec) -> std::result::Result<(), String> {
+pub fn check_resolution(grid: &GridSpec) -> std::result::Result<(), Refusal> {
     let across = grid.dims.iter().copied().max().unwrap_or(0);
     if across < MIN_VOXELS_ACROSS {
         return Err(format!(
             "the grid is {}x{}x{} voxels of {} m, fewer than {MIN_VOXELS_ACROSS} across: the hull \
              would be a few blocks; use a smaller visual_hull.voxel_size",
             grid.dims[0], grid.dims[1], grid.dims[2], grid.voxel
-        ));
+        )
+        .into());
     }
     Ok(())
 }
@@ -512,13 +519,14 @@ pub fn check_resolution(grid: &GridSpec) -> std::result::Result<(), String> {
 pub fn validate_for_cameras(
     p: &VisualHullParams,
     cameras: usize,
-) -> std::result::Result<(), String> {
+) -> std::result::Result<(), Refusal> {
     if p.min_views > cameras {
         return Err(format!(
             "visual_hull.min_views = {} is more than the capture's {cameras} cameras: every voxel \
              would be carved; use 2 (the default) up to {cameras}",
             p.min_views
-        ));
+        )
+        .into());
     }
     if p.all_but + 2 > cameras {
         return Err(format!(
@@ -527,7 +535,8 @@ pub fn validate_for_cameras(
             p.all_but,
             cameras.saturating_sub(p.all_but),
             cameras.saturating_sub(2)
-        ));
+        )
+        .into());
     }
     Ok(())
 }
@@ -595,7 +604,7 @@ pub fn reconstruct(
     cams: &[Camera],
     masks: &[GrayImage],
     p: &VisualHullParams,
-) -> std::result::Result<Option<Hull>, String> {
+) -> std::result::Result<Option<Hull>, Refusal> {
     validate(p)?;
     let counts: Vec<MaskCounts> = masks
         .iter()
@@ -615,7 +624,7 @@ pub fn reconstruct(
                 cam.name,
                 lo.as_slice(),
                 hi.as_slice()
-            ));
+            ).into());
         }
     }
     let grid = GridSpec::covering(lo, hi, p.voxel_size);

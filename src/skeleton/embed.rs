@@ -31,6 +31,7 @@
 //!    hips, crossed forearms) refuse the embedding with a message.
 
 use super::{Bone, Skeleton};
+use crate::error::Refusal;
 use crate::geometry::grid::GridSpec;
 use crate::geometry::TriMesh;
 use nalgebra::{Rotation3, Vector2, Vector3};
@@ -81,7 +82,7 @@ struct Interior {
 }
 
 impl Interior {
-    fn new(surface: &TriMesh) -> Result<Interior, String> {
+    fn new(surface: &TriMesh) -> Result<Interior, Refusal> {
         let (mut lo, mut hi) = (
             Vector3::repeat(f64::INFINITY),
             Vector3::repeat(f64::NEG_INFINITY),
@@ -244,7 +245,11 @@ impl Joints {
 /// Embeds `template` in the closed `surface` (world metres) whose up direction is `up`;
 /// the result keeps the template's bones, names, parents and `reference_frame`. Refuses,
 /// with a message naming the problem, a surface it cannot embed the template in.
-pub fn embed(template: &Skeleton, surface: &TriMesh, up: Vector3<f64>) -> Result<Skeleton, String> {
+pub fn embed(
+    template: &Skeleton,
+    surface: &TriMesh,
+    up: Vector3<f64>,
+) -> Result<Skeleton, Refusal> {
     embed_scored(template, surface, up).map(|e| e.skeleton)
 }
 
@@ -262,7 +267,7 @@ pub fn embed_scored(
     template: &Skeleton,
     surface: &TriMesh,
     up: Vector3<f64>,
-) -> Result<Embedding, String> {
+) -> Result<Embedding, Refusal> {
     if template.bones.is_empty() {
         return Err("the template has no bones".into());
     }
@@ -288,7 +293,7 @@ pub fn embed_scored(
     let weights: Vec<f64> = lengths.iter().map(|l| l / total).collect();
 
     let (placed, scale) = place(&interior, template, &tpl, &weights)?;
-    let finish = |joints: Joints| -> Result<(Joints, f64), String> {
+    let finish = |joints: Joints| -> Result<(Joints, f64), Refusal> {
         let refined = descend_joints(&interior, template, &tpl, joints, scale, &weights);
         check(&interior, template, &refined)?;
         let uncovered = check_coverage(&interior, template, &refined, &local)?;
@@ -353,7 +358,7 @@ fn place(
     template: &Skeleton,
     tpl: &Joints,
     weights: &[f64],
-) -> Result<(Joints, f64), String> {
+) -> Result<(Joints, f64), Refusal> {
     let inside = interior.inside_points();
     if inside.len() < 10 {
         return Err("the reference surface is too thin to hold a skeleton".into());
@@ -395,7 +400,8 @@ fn place(
             100.0 * width,
             100.0 * tall,
             100.0 * MIN_WIDTH_SHARE
-        ));
+        )
+        .into());
     }
     let template_axis = left_right_axis(template, tpl).unwrap_or_else(Vector2::x);
     let (tzmin, tzmax) = tpl
@@ -853,7 +859,7 @@ fn check_coverage(
     template: &Skeleton,
     joints: &Joints,
     surface: &TriMesh,
-) -> Result<f64, String> {
+) -> Result<f64, Refusal> {
     let mut uncovered = vec![0usize; template.bones.len()];
     let mut total = 0usize;
     for v in surface.vertices.iter().step_by(7) {
@@ -885,13 +891,14 @@ fn check_coverage(
              torso (an A-pose or T-pose) with --frame",
             100.0 * n as f64 / total as f64,
             template.bones[worst].name
-        ));
+        )
+        .into());
     }
     Ok(n as f64 / total.max(1) as f64)
 }
 
 /// Step 5: the refusals.
-fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<(), String> {
+fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<(), Refusal> {
     for (b, bone) in template.bones.iter().enumerate() {
         let (h, t) = joints.bone(b);
         let inside = [0.25, 0.5, 0.75]
@@ -903,7 +910,8 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
                 "bone '{}' could not be placed inside the surface: is the reference frame's \
                  surface complete, and the template a skeleton of this kind of body?",
                 bone.name
-            ));
+            )
+            .into());
         }
     }
     // The torso's depth: the deepest point along the bones that are not in a limb.
@@ -933,7 +941,8 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
                 template.bones[b].name,
                 100.0 * interior.at(&tail),
                 100.0 * torso_depth
-            ));
+            )
+            .into());
         }
     }
     // Left and right limbs of about one length.
@@ -962,7 +971,8 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
                 template.bones[other].name,
                 100.0 * a,
                 100.0 * b
-            ));
+            )
+            .into());
         }
     }
     Ok(())
@@ -1047,9 +1057,9 @@ mod tests {
         let body = crate::synth::humanoid::standard_body();
         let stick = upright_box([0.06, 0.06, 1.4]);
         let err = embed(&body.skeleton, &stick, Vector3::z()).unwrap_err();
-        assert!(err.contains("too thin for a body"), "{err}");
+        assert!(err.0.contains("too thin for a body"), "{err}");
         if let Err(e) = embed(&body.skeleton, &upright_box([0.45, 0.3, 1.7]), Vector3::z()) {
-            assert!(!e.contains("too thin for a body"), "{e}");
+            assert!(!e.0.contains("too thin for a body"), "{e}");
         }
     }
 }

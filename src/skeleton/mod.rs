@@ -1,6 +1,7 @@
 //! The skeleton as `skeleton.yaml` declares it: bones with heads and tails at the reference
 //! frame t0, parents listed first (`shared/dataset-format.md`).
 
+use crate::error::Refusal;
 use crate::error::{Error, Result};
 use nalgebra::Vector3;
 use serde::Deserialize;
@@ -68,12 +69,12 @@ struct BoneEntry {
 
 /// Bone names appear in CSV rows, BVH joint names and file names: a plain file name
 /// ([`crate::camera::check_name`]) without commas, quotes or white space.
-pub fn check_bone_name(name: &str) -> std::result::Result<(), String> {
+pub fn check_bone_name(name: &str) -> std::result::Result<(), Refusal> {
     crate::camera::check_name(name)?;
     if name.contains([',', '"']) || name.chars().any(char::is_whitespace) {
         return Err(format!(
             "the bone name {name:?} must not contain commas, quotes or white space (it is written into CSV and BVH files)"
-        ));
+        ).into());
     }
     Ok(())
 }

@@ -3,6 +3,7 @@
 
 use super::skinning::{self, Influences};
 use super::{Pose, PosedBones, Skeleton};
+use crate::error::Refusal;
 use crate::geometry::TriMesh;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -41,12 +42,13 @@ impl Default for ModelParams {
 }
 
 /// Checks parameters that do not depend on the data.
-pub fn validate(p: &ModelParams) -> std::result::Result<(), String> {
+pub fn validate(p: &ModelParams) -> std::result::Result<(), Refusal> {
     if !(p.blend_width > 0.0 && p.blend_width.is_finite()) {
         return Err(format!(
             "model.blend_width must be a positive width in metres, got {}",
             p.blend_width
-        ));
+        )
+        .into());
     }
     Ok(())
 }
@@ -58,7 +60,7 @@ pub fn build(
     skeleton: &Skeleton,
     mesh: &TriMesh,
     p: &ModelParams,
-) -> std::result::Result<BodyModel, String> {
+) -> std::result::Result<BodyModel, Refusal> {
     bones_inside(skeleton, mesh)?;
     let weights = skinning::skin_weights(skeleton, &mesh.vertices, p.blend_width);
     let labels = skinning::labels(&weights);
@@ -73,7 +75,7 @@ pub fn build(
 /// Checks that every bone of `skeleton` lies inside the closed surface `mesh` (at least
 /// two of the points at a quarter, half and three quarters of the bone inside); the message
 /// names the first bone that does not.
-pub fn bones_inside(skeleton: &Skeleton, mesh: &TriMesh) -> std::result::Result<(), String> {
+pub fn bones_inside(skeleton: &Skeleton, mesh: &TriMesh) -> std::result::Result<(), Refusal> {
     if mesh.vertices.is_empty() || mesh.triangles.is_empty() {
         return Err("the reference surface is empty".into());
     }
@@ -87,7 +89,8 @@ pub fn bones_inside(skeleton: &Skeleton, mesh: &TriMesh) -> std::result::Result<
                 "bone '{}' lies outside the reference surface ({} of 3 points along it inside); \
                  check skeleton.yaml's coordinates and reference_frame",
                 bone.name, inside
-            ));
+            )
+            .into());
         }
     }
     Ok(())

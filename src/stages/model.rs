@@ -137,7 +137,7 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
         let m = if mesh.vertices.is_empty() {
             format!("{m}: {}", super::why_hull_is_empty(inputs, frame))
         } else {
-            m
+            m.0
         };
         Error::invalid(&source, format!("model (reference frame {frame}): {m}"))
     })?;
