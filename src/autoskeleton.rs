@@ -381,10 +381,10 @@ fn write_overlay(job: &Job, frame: u32, skeleton: &Skeleton, path: &Path) -> Res
                 image::Rgb([v, v, v])
             })
         };
-        tiles.push(crate::overlay::skeleton_on_frame(
+        tiles.push(crate::drawing::skeleton_on_frame(
             cam, &image, &masks[c], &joints,
         ));
         labels.push(cam.name.clone());
     }
-    crate::imageio::write_rgb(path, &crate::overlay::contact_sheet(&tiles, &labels, 320))
+    crate::imageio::write_rgb(path, &crate::drawing::contact_sheet(&tiles, &labels, 320))
 }

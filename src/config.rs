@@ -74,6 +74,48 @@ struct PipelineFile {
     export: ExportParams,
 }
 
+/// Every parameter of pipeline.yaml's sections with its default, by dotted key
+/// (`graphcut.window`), sorted within each section: the one place the defaults
+/// are declared is each section's `Default`; the README's table is checked against this.
+/// A nested table (`fit.health`) is flattened; a list is one value.
+pub fn default_values() -> Result<Vec<(String, serde_json::Value)>> {
+    fn flatten(prefix: &str, v: serde_json::Value, out: &mut Vec<(String, serde_json::Value)>) {
+        match v {
+            serde_json::Value::Object(map) => {
+                for (k, v) in map {
+                    flatten(&format!("{prefix}.{k}"), v, out);
+                }
+            }
+            v => out.push((prefix.to_string(), v)),
+        }
+    }
+    let sections = [
+        (
+            "silhouette",
+            serde_json::to_value(SilhouetteParams::default()),
+        ),
+        (
+            "visual_hull",
+            serde_json::to_value(VisualHullParams::default()),
+        ),
+        ("graphcut", serde_json::to_value(GraphcutParams::default())),
+        (
+            "reliability",
+            serde_json::to_value(ReliabilityParams::default()),
+        ),
+        ("model", serde_json::to_value(ModelParams::default())),
+        ("fit", serde_json::to_value(FitParams::default())),
+        ("export", serde_json::to_value(ExportParams::default())),
+    ];
+    let mut out = Vec::new();
+    for (name, value) in sections {
+        let value = value
+            .map_err(|e| Error::Usage(format!("cannot encode the defaults of '{name}': {e}")))?;
+        flatten(name, value, &mut out);
+    }
+    Ok(out)
+}
+
 fn default_cache() -> PathBuf {
     PathBuf::from("cache")
 }

@@ -535,7 +535,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             let config = Config::load(&file)?;
             config.check_output_file("--out", &out)?;
             let job = Job::load(config, Some(FrameRange::single(frame)))?;
-            let img = hullpose::overlay::hull_beside_frame(&job, &stage, frame, camera.as_deref())?;
+            let img = hullpose::drawing::hull_beside_frame(&job, &stage, frame, camera.as_deref())?;
             hullpose::imageio::write_rgb(&out, &img)?;
             println!("wrote {}", out.display());
         }

@@ -48,7 +48,7 @@ fn the_dance_is_tracked_and_a_lost_hand_is_recovered() {
     assert!(ok, "{err}");
     assert!(err.contains("needed recovery"), "{err}");
     let out = d.join("output_no_prior");
-    let health = hullpose::eval::health::read(&out).unwrap();
+    let health = hullpose::eval::health_table::read(&out).unwrap();
     let recovered: Vec<u32> = health
         .iter()
         .filter(|r| r.recovery == "straightened")

@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use hullpose::geometry::grid::GridSpec;
-use hullpose::geometry::spatial::PointIndex;
+use hullpose::geometry::nearest::NearestTree;
 use hullpose::geometry::TriMesh;
 use std::path::Path;
 
@@ -58,11 +58,11 @@ fn concavity_errors(made: &Made, seq: &str, dir: &Path, frame: u32) -> (f64, f64
     .unwrap();
     let truth = sequence.ground_truth_mesh(frame).unwrap().unwrap();
     let normals = truth.vertex_normals();
-    let truth_index = PointIndex::new(truth.vertices.clone(), 0.02);
+    let truth_index = NearestTree::new(&truth.vertices);
     let depth = hullpose::photo::depth_maps(&sequence.cameras, &truth);
     let samples = hullpose::eval::sample_surface(&truth, 0.005);
-    let hull = PointIndex::new(mesh(dir, "visual_hull", frame).vertices, 0.02);
-    let refined = PointIndex::new(mesh(dir, "graphcut", frame).vertices, 0.02);
+    let hull = NearestTree::new(&mesh(dir, "visual_hull", frame).vertices);
+    let refined = NearestTree::new(&mesh(dir, "graphcut", frame).vertices);
     let (mut dh, mut dr, mut n) = (0.0, 0.0, 0usize);
     for s in &samples {
         let normal = normals[truth_index.nearest(s).unwrap().0];
@@ -88,10 +88,10 @@ fn concavity_errors(made: &Made, seq: &str, dir: &Path, frame: u32) -> (f64, f64
                 })
             })
             .count();
-        let h = hull.nearest(s).unwrap().1;
+        let h = hull.nearest(s).unwrap().1.sqrt();
         if seen >= 2 && h > 0.02 {
             dh += h;
-            dr += refined.nearest(s).unwrap().1;
+            dr += refined.nearest(s).unwrap().1.sqrt();
             n += 1;
         }
     }

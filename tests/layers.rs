@@ -32,7 +32,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("runner", 1),
     ("commands", 2),
     ("export", 2),
-    ("overlay", 2),
+    ("drawing", 2),
     ("eval", 2),
     ("bench", 2),
     ("slurm", 2),

@@ -4,7 +4,7 @@
 mod common;
 
 use common::*;
-use hullpose::geometry::spatial::PointIndex;
+use hullpose::geometry::nearest::NearestTree;
 use hullpose::skeleton::model::BodyModel;
 use hullpose::skeleton::Skeleton;
 use nalgebra::Vector3;
@@ -40,11 +40,11 @@ fn posing_errors(made: &Made, seq: &str, model: &BodyModel, clearance: f64) -> V
                 &data.join(format!("ground_truth/meshes/{frame:06}.ply")),
             )
             .unwrap();
-            let index = PointIndex::new(hullpose::eval::sample_surface(&truth, 0.002), 0.01);
+            let index = NearestTree::new(&hullpose::eval::sample_surface(&truth, 0.002));
             let posed = model.pose(pose);
             let sum: f64 = away
                 .iter()
-                .map(|&i| index.nearest(&posed.vertices[i]).unwrap().1)
+                .map(|&i| index.nearest(&posed.vertices[i]).unwrap().1.sqrt())
                 .sum();
             (*frame, sum / away.len() as f64)
         })

@@ -49,7 +49,7 @@ pub fn evaluate(job: &Job) -> Result<()> {
 /// The health part of `evaluate`: fit.csv's silhouette IoU and joint motion per frame, a
 /// table and a plot, with or without ground truth.
 fn evaluate_health(job: &Job) -> Result<()> {
-    let rows: Vec<_> = crate::eval::health::read(&job.config.output)?
+    let rows: Vec<_> = crate::eval::health_table::read(&job.config.output)?
         .into_iter()
         .filter(|r| job.frames.contains(&r.frame))
         .collect();
@@ -57,9 +57,9 @@ fn evaluate_health(job: &Job) -> Result<()> {
         return Ok(());
     }
     println!("fit health: the posed model's silhouette IoU per camera, and joint motion");
-    print!("{}", crate::eval::health::table(&rows));
+    print!("{}", crate::eval::health_table::table(&rows));
     let dir = job.config.output.join("evaluation");
-    let path = crate::eval::health::write_plot(&dir, &rows)?;
+    let path = crate::eval::health_table::write_plot(&dir, &rows)?;
     println!("written to {}\n", path.display());
     Ok(())
 }

@@ -15,14 +15,14 @@
 use crate::artifacts::reconstruction::{self, Surface};
 use crate::error::{Error, Result};
 use crate::geometry::grid::GridSpec;
-use crate::geometry::spatial::PointIndex;
+use crate::geometry::nearest::NearestTree;
 use crate::geometry::TriMesh;
 use crate::runner::Job;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 
-pub mod health;
+pub mod health_table;
 pub mod pose;
 pub mod reliability;
 
@@ -89,7 +89,8 @@ const SAMPLE_SPACING: f64 = 0.002;
 /// The true surface sampled every 2 mm with its outward normals, indexed for
 /// nearest-point queries.
 pub struct TruthSamples {
-    index: PointIndex,
+    points: Vec<Vector3<f64>>,
+    index: NearestTree,
     normals: Vec<Vector3<f64>>,
 }
 
@@ -97,7 +98,8 @@ impl TruthSamples {
     pub fn new(truth: &TriMesh) -> TruthSamples {
         let (points, normals) = sample_oriented(truth, SAMPLE_SPACING);
         TruthSamples {
-            index: PointIndex::new(points, 0.01),
+            index: NearestTree::new(&points),
+            points,
             normals,
         }
     }
@@ -107,10 +109,11 @@ impl TruthSamples {
     /// as good as its tangent plane), else the distance to that sample with the side the
     /// normal gives. Infinite for an empty truth.
     pub fn signed_distance(&self, v: &Vector3<f64>) -> f64 {
-        let Some((i, d)) = self.index.nearest(v) else {
+        let Some((i, d2)) = self.index.nearest(v) else {
             return f64::INFINITY;
         };
-        let along = (v - self.index.points()[i]).dot(&self.normals[i]);
+        let d = d2.sqrt();
+        let along = (v - self.points[i]).dot(&self.normals[i]);
         if d <= 2.0 * SAMPLE_SPACING {
             along
         } else if along < 0.0 {
@@ -141,12 +144,16 @@ pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TruthSamples
     d.sort_by(f64::total_cmp);
     signed.sort_by(f64::total_cmp);
     let outside = signed.iter().filter(|&&x| x > 0.0).count();
-    let points = truth.index.points();
+    let points = &truth.points;
     let share = |n: usize| n as f64 / points.len().max(1) as f64;
-    let recon_index = PointIndex::new(sample_surface(recon, SAMPLE_SPACING), 0.01);
+    let recon_index = NearestTree::new(&sample_surface(recon, SAMPLE_SPACING));
     let near = points
         .par_iter()
-        .filter(|p| recon_index.any_within(p, grid.voxel))
+        .filter(|p| {
+            recon_index
+                .nearest(p)
+                .is_some_and(|(_, d2)| d2 <= grid.voxel * grid.voxel)
+        })
         .count();
     let inside = points
         .par_iter()

@@ -1,10 +1,10 @@
 //! Overlay pictures: the fitted skeleton projected on the input frames with the silhouette's
-//! outline ([`crate::overlay::skeleton_on_frame`]), for the cameras `export.overlay_cameras`
+//! outline ([`crate::drawing::skeleton_on_frame`]), for the cameras `export.overlay_cameras`
 //! names (default: the first) at every selected frame, and with `export.contact_sheet` one
 //! sheet of all cameras per frame.
 
+use crate::drawing::{contact_sheet, skeleton_on_frame};
 use crate::error::Result;
-use crate::overlay::{contact_sheet, skeleton_on_frame};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::Pose;
 use crate::stages::Context;

@@ -13,6 +13,5 @@ pub mod obj;
 pub mod ply;
 pub mod raster;
 pub mod smooth;
-pub mod spatial;
 
 pub use mesh::TriMesh;

@@ -397,7 +397,7 @@ pub fn output_joint_errors_cm(dir: &Path, seq: &str) -> Vec<f64> {
 /// posed model's worst-camera silhouette IoU never falls below 0.9 times its value at the
 /// reference frame (issue bound: no drift, no lost limb).
 pub fn assert_fit_health(dir: &Path) {
-    let rows = hullpose::eval::health::read(&dir.join("output")).unwrap();
+    let rows = hullpose::eval::health_table::read(&dir.join("output")).unwrap();
     assert!(!rows.is_empty(), "fit.csv has the health columns");
     let reference = rows.iter().find(|r| r.status == "reference").unwrap();
     assert!(
