@@ -128,3 +128,51 @@ fn tracking_from_the_automatic_skeleton_stays_within_two_and_a_half_centimetres(
     assert_eq!(errors.len(), 9);
     assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
 }
+
+/// The humanoid stands with its arms hanging against its hips for the first ten frames
+/// (`--motion arms-down`; no open pose before the tenth frame): `pipeline skeleton` still
+/// embeds the template within 3 cm of the truth at the frame it picks, and tracking from it
+/// covers every frame within 2.5 cm.
+#[test]
+fn a_sequence_without_an_open_pose_at_its_start_is_embedded_and_tracked() {
+    let dir = process_tempdir();
+    let d = dir.path();
+    let mut options = SynthOptions::new(SceneKind::Humanoid, d);
+    (options.cameras, options.width, options.height) = (8, 640, 480);
+    options.motion = hullpose::synth::Motion::ArmsDown;
+    hullpose::synth::generate(&options).unwrap();
+    // Frames 0..15: arms down to frame 9, open at 13, towards the crossed forearms after.
+    let yaml = std::fs::read_to_string(d.join("pipeline.yaml")).unwrap();
+    std::fs::write(
+        d.join("pipeline.yaml"),
+        yaml.replace("frames: all", "frames: 0..15"),
+    )
+    .unwrap();
+    let path = d.join("data/humanoid/skeleton.yaml");
+    std::fs::remove_file(&path).unwrap();
+    let (ok, out, err) = run_cli(&["skeleton", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    let made = Skeleton::read(&path).unwrap();
+    let t0 = made.reference_frame;
+    // The truth at the chosen frame, from the ground truth's joints.
+    let truth_rows =
+        hullpose::joints::read(&d.join("data/humanoid/ground_truth/joints.csv")).unwrap();
+    let mut truth = made.clone();
+    for bone in &mut truth.bones {
+        let row = truth_rows
+            .iter()
+            .find(|r| r.frame == t0 && r.bone == bone.name)
+            .unwrap();
+        (bone.head, bone.tail) = (row.head, row.tail);
+    }
+    let (mean, worst) = joint_errors(&made, &truth);
+    eprintln!("arms down: frame {t0} chosen, mean {mean:.2} cm, worst {worst:.2} cm\n{out}");
+    assert!(mean <= 3.0 && worst <= 5.0, "{mean:.2} / {worst:.2}\n{out}");
+
+    let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    let errors = output_joint_errors_cm(d, "humanoid");
+    eprintln!("arms down, tracked: mean joint error per frame (cm): {errors:.2?}");
+    assert_eq!(errors.len(), 16);
+    assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
+}

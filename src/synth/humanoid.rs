@@ -347,6 +347,17 @@ fn a_pose(body: &Body) -> Pose {
     Pose::rest(body.skeleton.bones.len())
 }
 
+/// Standing with the arms hanging straight at the sides, against the hips.
+fn arms_down(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    for (s, side) in [(1.0, "l"), (-1.0, "r")] {
+        for part in ["upper_arm", "forearm", "hand"] {
+            p.point(&format!("{part}_{side}"), Vector3::new(s * 0.1, 0.0, -1.0));
+        }
+    }
+    p.pose
+}
+
 fn hands_on_hips(body: &Body) -> Pose {
     let mut p = PoseBuilder::new(body);
     for (s, side) in [(1.0, "l"), (-1.0, "r")] {
@@ -458,8 +469,9 @@ pub fn scene(
     motion: super::Motion,
     proportions: Proportions,
 ) -> Scene {
-    let body = body(proportions);
+    let mut body = body(proportions);
     let bone = |n: &str| body.skeleton.bone_index(n).expect("known bone");
+    let down = arms_down(&body);
     let (a, hips, cross, knee, step) = (
         a_pose(&body),
         hands_on_hips(&body),
@@ -492,6 +504,19 @@ pub fn scene(
             ],
             DANCE_KEY_FRAMES,
             DANCE_TURN_DEG,
+        ),
+        super::Motion::ArmsDown => (
+            vec![
+                (0.0, &down, vec![]),
+                (9.0, &down, vec![]),
+                (13.0, &a, vec![]),
+                (17.0, &cross, crossed()),
+                (18.0, &cross, crossed()),
+                (21.0, &a, vec![]),
+                (23.0, &a, vec![]),
+            ],
+            KEY_FRAMES,
+            0.0,
         ),
         super::Motion::Default => (
             vec![
@@ -549,6 +574,16 @@ pub fn scene(
         },
         seed,
     );
+    if motion == super::Motion::ArmsDown {
+        // The reference frame is the A-pose's (key frame 13; the nearest frame, snapped to
+        // it, when the frames sampled miss it).
+        let times = scene::sample_times(key_frames, frames);
+        let reference = (0..times.len())
+            .min_by(|&x, &y| (times[x] - 13.0).abs().total_cmp(&(times[y] - 13.0).abs()))
+            .unwrap_or(0);
+        poses[reference] = a_pose(&body);
+        body.skeleton.reference_frame = reference as u32;
+    }
     Scene {
         name: "humanoid".into(),
         body,

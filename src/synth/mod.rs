@@ -95,6 +95,10 @@ pub enum Motion {
     /// chest and back with hand steps of up to 16 cm per frame, the left leg steps across the
     /// right, and the whole body turns 120 degrees over the sequence (39 frames).
     Dance,
+    /// The default motion after ten frames standing with the arms hanging at the sides
+    /// against the hips (humanoid only): no frame before the tenth is an open pose. The
+    /// A-pose comes at key frame 13, the reference frame of skeleton.yaml.
+    ArmsDown,
 }
 
 /// Which scene to make.
@@ -172,8 +176,10 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     if opts.proportions != humanoid::Proportions::default() && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--body needs --scene humanoid".into()));
     }
-    if opts.motion == Motion::Dance && opts.scene != SceneKind::Humanoid {
-        return Err(Error::Usage("--motion dance needs --scene humanoid".into()));
+    if opts.motion != Motion::Default && opts.scene != SceneKind::Humanoid {
+        return Err(Error::Usage(
+            "--motion dance and --motion arms-down need --scene humanoid".into(),
+        ));
     }
     Ok(match opts.scene {
         SceneKind::Tripod => tripod::scene(
@@ -203,6 +209,7 @@ fn key_frames(opts: &SynthOptions) -> (usize, f64) {
         (SceneKind::Tripod, _) => (tripod::KEY_FRAMES, 25.0),
         (SceneKind::Humanoid, Motion::Dance) => (humanoid::DANCE_KEY_FRAMES, 25.0),
         (SceneKind::Humanoid, Motion::Default) => (humanoid::KEY_FRAMES, 8.0),
+        (SceneKind::Humanoid, Motion::ArmsDown) => (humanoid::KEY_FRAMES, 8.0),
     }
 }
 

@@ -10,7 +10,7 @@ pub struct Scene {
     /// Sequence name (the folder under data/).
     pub name: String,
     pub body: Body,
-    /// One pose per frame, frame 0 the rest (reference) pose.
+    /// One pose per frame; the skeleton's reference frame holds the rest pose.
     pub poses: Vec<Pose>,
     pub cameras: Vec<Camera>,
     /// Pairs of bones whose flesh is meant to touch, per frame: (frame, bone a, bone b).
