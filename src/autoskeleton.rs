@@ -142,6 +142,14 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
     let surface = reconstruction::read_mesh(&job.cache, Surface::Refined, frame)?;
     // Phantom pieces (floor blobs, cables) would distort the body's height and coverage.
     let body = surface.largest_piece();
+    if body.vertices.is_empty() {
+        let masks = crate::stages::load_silhouettes(&job.context(), frame)?;
+        let why = crate::recon::silhouette::Coverage::of(&job.sequence.cameras, &masks).why_empty();
+        return Ok(Tried {
+            frame,
+            outcome: Err(format!("the frame's hull is empty: {why}")),
+        });
+    }
     let outcome = match crate::skeleton::embed::embed_scored(template, &body, up) {
         Ok(e) => {
             let masks = crate::stages::load_silhouettes(&job.context(), frame)?;
