@@ -358,9 +358,12 @@ impl Sequence {
     /// its mask stands in (white silhouette on black), for overlays and pictures.
     pub fn load_frame(&self, cam: usize, frame: u32) -> Result<RgbImage> {
         if !self.has_frames {
-            let mask = self
-                .load_mask(cam, frame)?
-                .expect("a masks-only capture has masks");
+            let mask = self.load_mask(cam, frame)?.ok_or_else(|| {
+                Error::invalid(
+                    self.mask_path(cam, frame),
+                    "missing: a capture without frames/ needs a mask for every camera and frame",
+                )
+            })?;
             return Ok(image::DynamicImage::ImageLuma8(mask).into_rgb8());
         }
         self.load_rgb(cam, &self.frame_path(cam, frame))
