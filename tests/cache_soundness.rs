@@ -11,26 +11,7 @@
 mod common;
 
 use common::*;
-use std::collections::BTreeMap;
 use std::path::Path;
-
-/// Every file under `dir` with its bytes, by relative path.
-fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap().display().to_string();
-                out.insert(rel, std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
-}
 
 /// The sample set up for frames 0..1, with `section` (YAML text) appended.
 fn project(dir: &Path, section: &str) {
@@ -94,19 +75,18 @@ fn a_changed_parameter_over_the_cache_equals_a_fresh_run() {
         let fresh = outer.path().join(format!("fresh-{name}"));
         project(&fresh, section);
         run(&fresh);
-        let (a, b) = (files(&cached.join("output")), files(&fresh.join("output")));
-        assert_eq!(
-            a.keys().collect::<Vec<_>>(),
-            b.keys().collect::<Vec<_>>(),
-            "{name}: other files"
+        let (a, b) = (
+            tree_files(&cached.join("output")),
+            tree_files(&fresh.join("output")),
         );
-        for (path, bytes) in &a {
-            assert!(
-                bytes == &b[path],
-                "{name}: output/{path} over the cache differs from a fresh run's; the run said:\n{out}"
-            );
-        }
+        let what =
+            format!("{name} changed, over the cache, against a fresh run; the run said:\n{out}");
+        assert_same_files(&a, &b, "output", &what);
         // The change did change something: the test can fail.
-        assert_ne!(a, files(&base.join("output")), "{name}: nothing changed");
+        assert_ne!(
+            a,
+            tree_files(&base.join("output")),
+            "{name}: nothing changed"
+        );
     }
 }

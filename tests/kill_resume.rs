@@ -5,27 +5,7 @@
 mod common;
 
 use common::*;
-use std::collections::BTreeMap;
 use std::path::Path;
-
-/// Every file under `dir` but the manifests and the lock, with its bytes.
-fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            let name = p.file_name().unwrap().to_string_lossy().to_string();
-            if p.is_dir() {
-                stack.push(p);
-            } else if !name.ends_with(".manifest.yaml") && name != ".lock" {
-                let rel = p.strip_prefix(dir).unwrap().display().to_string();
-                out.insert(rel, std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
-}
 
 fn project(dir: &Path) {
     copy_sample(dir);
@@ -50,7 +30,10 @@ fn a_run_killed_during_any_stage_and_resumed_equals_a_fresh_run() {
     project(&fresh);
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &fresh);
     assert!(ok, "{err}");
-    let (out_ref, cache_ref) = (files(&fresh.join("output")), files(&fresh.join("cache")));
+    let (out_ref, cache_ref) = (
+        tree_files(&fresh.join("output")),
+        tree_files(&fresh.join("cache")),
+    );
     assert!(cache_ref.keys().any(|k| k.starts_with("fit/")));
 
     let stages = [
@@ -88,28 +71,12 @@ fn a_run_killed_during_any_stage_and_resumed_equals_a_fresh_run() {
         let _ = child.wait();
         let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &dir);
         assert!(ok, "{stage}: {err}");
-        let (out, cache) = (files(&dir.join("output")), files(&dir.join("cache")));
-        assert_eq!(
-            cache.keys().collect::<Vec<_>>(),
-            cache_ref.keys().collect::<Vec<_>>(),
-            "killed during {stage}: other cache files"
+        let (out, cache) = (
+            tree_files(&dir.join("output")),
+            tree_files(&dir.join("cache")),
         );
-        for (path, bytes) in &cache {
-            assert!(
-                bytes == &cache_ref[path],
-                "killed during {stage}: cache/{path} differs from a fresh run's"
-            );
-        }
-        assert_eq!(
-            out.keys().collect::<Vec<_>>(),
-            out_ref.keys().collect::<Vec<_>>(),
-            "killed during {stage}: other output files"
-        );
-        for (path, bytes) in &out {
-            assert!(
-                bytes == &out_ref[path],
-                "killed during {stage}: output/{path} differs from a fresh run's"
-            );
-        }
+        let what = format!("killed during {stage}, resumed, against a fresh run");
+        assert_same_files(&cache, &cache_ref, "cache", &what);
+        assert_same_files(&out, &out_ref, "output", &what);
     }
 }

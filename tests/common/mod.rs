@@ -437,3 +437,41 @@ pub fn output_worst_joint_errors_cm(dir: &Path, seq: &str) -> Vec<(u32, f64)> {
     }
     worst.into_iter().collect()
 }
+
+/// Every file under `dir` with its bytes, by relative path; the cache's manifests (which
+/// record seconds) and lock left out.
+pub fn tree_files(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            let name = p.file_name().unwrap().to_string_lossy().to_string();
+            if p.is_dir() {
+                stack.push(p);
+            } else if !name.ends_with(".manifest.yaml") && name != ".lock" {
+                let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// Asserts that two [`tree_files`] hold the same files with the same bytes; `what` names
+/// the comparison and `folder` the tree in messages.
+pub fn assert_same_files(
+    a: &std::collections::BTreeMap<String, Vec<u8>>,
+    b: &std::collections::BTreeMap<String, Vec<u8>>,
+    folder: &str,
+    what: &str,
+) {
+    assert_eq!(
+        a.keys().collect::<Vec<_>>(),
+        b.keys().collect::<Vec<_>>(),
+        "{what}: other files in {folder}"
+    );
+    for (path, bytes) in a {
+        assert!(bytes == &b[path], "{what}: {folder}/{path} differs");
+    }
+}
