@@ -55,7 +55,7 @@ pub fn from_cache(job: &crate::runner::Job, formats: &[Format]) -> Result<Finish
     run(&job.context(), &job.frames, formats)
 }
 
-/// Writes `formats` for `frames` from the cache (which must hold them: the export stage runs
+/// Writes `formats` for `frames` from the cache (which must hold them: `pipeline run` exports
 /// after the stages it reads, and [`from_cache`] checks first).
 pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished> {
     let mut written = Finished::default();
