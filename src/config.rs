@@ -302,8 +302,11 @@ pub struct ExportParams {
     /// What `pipeline run` exports after the fit (default: every format but OBJ, which
     /// holds the same meshes as the PLY files at three times their size).
     pub formats: Vec<Format>,
-    /// Capture frame rate, frames per second: the animation's timing (glb, bvh).
-    pub frame_rate: f64,
+    /// Capture frame rate, frames per second, when known: the animation's timing (glb,
+    /// bvh) and the fit's joint-speed check and motion prior. Unset: the animations are
+    /// timed at [`ANIMATION_RATE`] (with a note), the joint-speed check is off, and the
+    /// motion prior takes its spread from the tracked motion alone.
+    pub frame_rate: Option<f64>,
     /// The world's up direction (`+x`, `-x`, `+y`, `-y`, `+z`, `-z`), when known: glb and
     /// bvh are turned so that it becomes +Y, as both formats expect. Unset: the world axes
     /// are written unchanged.
@@ -321,7 +324,7 @@ impl Default for ExportParams {
     fn default() -> Self {
         ExportParams {
             formats: vec![Format::Glb, Format::Bvh, Format::Ply, Format::Overlay],
-            frame_rate: 25.0,
+            frame_rate: None,
             up_axis: None,
             bvh_rotation_order: "ZXY".into(),
             overlay_cameras: Vec::new(),
@@ -330,14 +333,19 @@ impl Default for ExportParams {
     }
 }
 
+/// The animations' timing when `export.frame_rate` is unset, frames per second.
+pub const ANIMATION_RATE: f64 = 25.0;
+
 /// Checks the parameters; the message names the key.
 pub fn validate_export(p: &ExportParams) -> std::result::Result<(), Refusal> {
-    if !(p.frame_rate.is_finite() && p.frame_rate > 0.0) {
-        return Err(format!(
-            "key 'export.frame_rate': {} is not a positive number of frames per second",
-            p.frame_rate
-        )
-        .into());
+    if let Some(rate) = p.frame_rate {
+        if !(rate.is_finite() && rate > 0.0) {
+            return Err(format!(
+                "key 'export.frame_rate': {rate} is not a positive number of frames per second \
+                 (leave it out when the capture's rate is unknown)"
+            )
+            .into());
+        }
     }
     RotationOrder::parse(&p.bvh_rotation_order)
         .map_err(|m| format!("key 'export.bvh_rotation_order': {m}"))?;

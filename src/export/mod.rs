@@ -126,12 +126,24 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
             .iter()
             .sum::<usize>();
     }
+    let animation_rate = p.frame_rate.unwrap_or(crate::config::ANIMATION_RATE);
+    if p.frame_rate.is_none()
+        && formats
+            .iter()
+            .any(|f| matches!(f, Format::Glb | Format::Bvh))
+    {
+        written.warnings.push(format!(
+            "export.frame_rate is unset: glb and bvh are timed at {} frames per second (set it \
+             to the capture's rate)",
+            crate::config::ANIMATION_RATE
+        ));
+    }
     for &format in &formats {
         match format {
             Format::Glb => {
                 let (model, poses) = motion.as_ref().expect("loaded");
                 let path = out.join(format!("{name}.glb"));
-                let bytes = gltf::to_glb(model, poses, p.frame_rate, p.up_axis, &name);
+                let bytes = gltf::to_glb(model, poses, animation_rate, p.up_axis, &name);
                 crate::fsutil::write_atomic(&path, &bytes)?;
                 written.outputs.push(path);
                 written.files += 1;
@@ -141,7 +153,7 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
                 let order = crate::geometry::axes::RotationOrder::parse(&p.bvh_rotation_order)
                     .map_err(|m| Error::invalid(&ctx.config.path, m))?;
                 let path = out.join(format!("{name}.bvh"));
-                let text = bvh::to_bvh(&model.skeleton, poses, p.frame_rate, p.up_axis, order);
+                let text = bvh::to_bvh(&model.skeleton, poses, animation_rate, p.up_axis, order);
                 crate::fsutil::write_atomic(&path, text.as_bytes())?;
                 written.outputs.push(path);
                 written.files += 1;

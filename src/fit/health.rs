@@ -145,7 +145,8 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
 pub const RECENT_FRAMES: usize = 5;
 
 /// Why a frame is implausible (empty when it is not): `fast_joint` when a joint moved
-/// faster than `p.max_joint_speed` at `frame_rate`, `iou_drop` when the worst IoU fell below
+/// faster than `p.max_joint_speed` at `frame_rate` (not judged when the rate is unknown),
+/// `iou_drop` when the worst IoU fell below
 /// `p.iou_drop` times the median of `recent` (the previous frames' worst IoU, oldest first;
 /// only its last [`RECENT_FRAMES`] count), `iou_drift` when it fell below `p.iou_drift` times
 /// `reference` (the reference frame's worst IoU; none at the reference frame), `unexplained` when the fit left at least
@@ -157,10 +158,10 @@ pub fn flags(
     recent: &[f64],
     reference: Option<f64>,
     p: &super::params::HealthParams,
-    frame_rate: f64,
+    frame_rate: Option<f64>,
 ) -> Vec<&'static str> {
     let mut out = Vec::new();
-    if h.joint_motion * frame_rate > p.max_joint_speed {
+    if frame_rate.is_some_and(|f| h.joint_motion * f > p.max_joint_speed) {
         out.push("fast_joint");
     }
     let last = &recent[recent.len().saturating_sub(RECENT_FRAMES)..];
@@ -235,13 +236,13 @@ mod tests {
         assert!((shifted[0] - 1.0 / 3.0).abs() < 0.05, "{shifted:?}");
         let p = crate::fit::params::HealthParams::default();
         let good = summarize(&[0.95, 0.96], 0.1);
-        assert!(flags(&good, &[0.96, 0.95, 0.97], Some(0.97), &p, 25.0).is_empty());
+        assert!(flags(&good, &[0.96, 0.95, 0.97], Some(0.97), &p, Some(25.0)).is_empty());
         let mut lost = summarize(&[0.7, 0.96], 0.3);
         lost.unexplained_cm2 = Some(12.0);
         lost.interpenetration = 0.08;
         lost.energy_ratio = 12.0;
         assert_eq!(
-            flags(&lost, &[0.96], Some(0.96), &p, 25.0),
+            flags(&lost, &[0.96], Some(0.96), &p, Some(25.0)),
             [
                 "fast_joint",
                 "iou_drop",
@@ -252,13 +253,18 @@ mod tests {
             ]
         );
         assert_eq!(
-            flags(&lost, &[], None, &p, 10.0),
+            flags(&lost, &[], None, &p, Some(10.0)),
+            ["unexplained", "interpenetration", "energy_jump"]
+        );
+        // An unknown frame rate judges no speed.
+        assert_eq!(
+            flags(&lost, &[], None, &p, None),
             ["unexplained", "interpenetration", "energy_jump"]
         );
         // A slow drift: level with the recent frames, far below the reference.
         let drifted = summarize(&[0.8, 0.9], 0.0);
         assert_eq!(
-            flags(&drifted, &[0.81, 0.8, 0.8], Some(0.95), &p, 25.0),
+            flags(&drifted, &[0.81, 0.8, 0.8], Some(0.95), &p, Some(25.0)),
             ["iou_drift"]
         );
         let h = summarize(&[0.9, 0.5, 0.8, 0.95], 0.02);

@@ -110,6 +110,12 @@ pub struct FitParams {
 /// ([`FitParams::motion_prior_acceleration`]).
 pub const PRIOR_NOISE: f64 = 0.002;
 
+/// The frame rate the motion prior's weight is computed at when the capture's is unknown,
+/// frames per second: its spread then comes from the tracked motion (it is never below half
+/// the last step's RMS motion, [`crate::fit::tracking`]), so the nominal rate only sets how
+/// much a slow body is trusted to keep its velocity.
+pub const NOMINAL_FRAME_RATE: f64 = 25.0;
+
 /// The motion prior's weight per model vertex at `frame_rate` frames per second (0: none).
 pub fn motion_prior_weight(acceleration: f64, frame_rate: f64) -> f64 {
     if acceleration <= 0.0 || frame_rate <= 0.0 {

@@ -43,9 +43,9 @@ pub(super) fn sources(_ctx: &Context, _frame: u32, _key: &mut KeyBuilder) -> Res
 #[derive(Debug, Clone, Serialize)]
 pub struct Settings {
     pub fit: crate::fit::FitParams,
-    /// Capture frame rate, frames per second (`export.frame_rate`): the motion prior's
-    /// weight and the joint-speed check.
-    pub frame_rate: f64,
+    /// Capture frame rate, frames per second (`export.frame_rate`), when known: the motion
+    /// prior's weight and the joint-speed check (off when unknown).
+    pub frame_rate: Option<f64>,
     /// Whether the capture has frame images (without, the fit weighs contacts only and
     /// leaves the unexplained-surface check out).
     pub photo: bool,
@@ -134,12 +134,14 @@ fn track(
     let params = &settings.fit;
     let mut fitter = Fitter::new(model, params.clone());
     let frame_rate = settings.frame_rate;
-    fitter.max_joint_step = Some(params.health.max_joint_speed / frame_rate);
+    fitter.max_joint_step = frame_rate.map(|f| params.health.max_joint_speed / f);
     // The motion prior belongs to the proposed method's energy; the baselines stay the
     // methods the paper compares.
     if params.method == crate::fit::Method::Proposed {
-        fitter.motion_prior =
-            crate::fit::params::motion_prior_weight(params.motion_prior_acceleration, frame_rate);
+        fitter.motion_prior = crate::fit::params::motion_prior_weight(
+            params.motion_prior_acceleration,
+            frame_rate.unwrap_or(crate::fit::params::NOMINAL_FRAME_RATE),
+        );
     }
     fitter.photo_consistent = settings.photo;
     let mut tracker = Tracker::new(fitter);
