@@ -269,30 +269,14 @@ fn a_resumed_fit_equals_a_fresh_one_byte_for_byte() {
     sample_of_five_frames(&killed);
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--until", "model"], &killed);
     assert!(ok, "{err}");
-    let mut child = std::process::Command::new(pipeline_bin())
-        .args(["run", "pipeline.yaml"])
-        .current_dir(&killed)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let started = std::time::Instant::now();
     let fit_dir = killed.join("cache/fit");
-    while started.elapsed().as_secs() < 120 {
-        let states = std::fs::read_dir(&fit_dir)
-            .map(|d| {
-                d.flatten()
-                    .filter(|e| e.file_name().to_string_lossy().ends_with(".state.json"))
-                    .count()
-            })
-            .unwrap_or(0);
-        if states >= 2 || child.try_wait().unwrap().is_some() {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    let _ = child.kill();
-    let _ = child.wait();
+    run_killed_when(&killed, || {
+        std::fs::read_dir(&fit_dir).map_or(0, |d| {
+            d.flatten()
+                .filter(|e| e.file_name().to_string_lossy().ends_with(".state.json"))
+                .count()
+        }) >= 2
+    });
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &killed);
     assert!(ok, "{err}");
     assert_same(&reference, &fit_outputs(&killed), "killed and resumed");

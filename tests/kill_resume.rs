@@ -51,24 +51,9 @@ fn a_run_killed_during_any_stage_and_resumed_equals_a_fresh_run() {
             let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--until", before], &dir);
             assert!(ok, "{err}");
         }
-        let mut child = std::process::Command::new(pipeline_bin())
-            .args(["run", "pipeline.yaml"])
-            .current_dir(&dir)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
         // Killed as soon as the stage has committed its first artifact (or when the run
         // ends first, which the resume then reuses).
-        let started = std::time::Instant::now();
-        while started.elapsed().as_secs() < 120
-            && committed(&dir, stage) == 0
-            && child.try_wait().unwrap().is_none()
-        {
-            std::thread::sleep(std::time::Duration::from_millis(5));
-        }
-        let _ = child.kill();
-        let _ = child.wait();
+        run_killed_when(&dir, || committed(&dir, stage) > 0);
         let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &dir);
         assert!(ok, "{stage}: {err}");
         let (out, cache) = (

@@ -475,3 +475,21 @@ pub fn assert_same_files(
         assert!(bytes == &b[path], "{what}: {folder}/{path} differs");
     }
 }
+
+/// Runs `pipeline run pipeline.yaml` in `dir` and kills it (SIGKILL) as soon as `reached`
+/// says so (or when the run ends first, or after two minutes).
+pub fn run_killed_when(dir: &Path, reached: impl Fn() -> bool) {
+    let mut child = std::process::Command::new(pipeline_bin())
+        .args(["run", "pipeline.yaml"])
+        .current_dir(dir)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    while started.elapsed().as_secs() < 120 && !reached() && child.try_wait().unwrap().is_none() {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+}
