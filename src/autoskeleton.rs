@@ -144,7 +144,7 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
     let body = surface.largest_piece();
     if body.vertices.is_empty() {
         let masks = crate::stages::load_silhouettes(&job.context(), frame)?;
-        let why = crate::recon::silhouette::Coverage::of(&job.sequence.cameras, &masks).why_empty();
+        let why = crate::stages::why_hull_is_empty(&job.sequence.cameras, Ok(masks));
         return Ok(Tried {
             frame,
             outcome: Err(format!("the frame's hull is empty: {why}")),

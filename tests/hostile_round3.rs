@@ -270,13 +270,7 @@ fn a_resumed_fit_equals_a_fresh_one_byte_for_byte() {
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--until", "model"], &killed);
     assert!(ok, "{err}");
     let fit_dir = killed.join("cache/fit");
-    run_killed_when(&killed, || {
-        std::fs::read_dir(&fit_dir).map_or(0, |d| {
-            d.flatten()
-                .filter(|e| e.file_name().to_string_lossy().ends_with(".state.json"))
-                .count()
-        }) >= 2
-    });
+    run_killed_when(&killed, || count_files_ending(&fit_dir, ".state.json") >= 2);
     let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &killed);
     assert!(ok, "{err}");
     assert_same(&reference, &fit_outputs(&killed), "killed and resumed");

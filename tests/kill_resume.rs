@@ -14,15 +14,6 @@ fn project(dir: &Path) {
     std::fs::write(path, text.replace("frames: all", "frames: 0..2")).unwrap();
 }
 
-/// The committed artifacts of `stage` in `dir`'s cache.
-fn committed(dir: &Path, stage: &str) -> usize {
-    std::fs::read_dir(dir.join("cache").join(stage)).map_or(0, |d| {
-        d.flatten()
-            .filter(|e| e.file_name().to_string_lossy().ends_with(".manifest.yaml"))
-            .count()
-    })
-}
-
 #[test]
 fn a_run_killed_during_any_stage_and_resumed_equals_a_fresh_run() {
     let outer = tempfile::tempdir().unwrap();
@@ -53,7 +44,9 @@ fn a_run_killed_during_any_stage_and_resumed_equals_a_fresh_run() {
         }
         // Killed as soon as the stage has committed its first artifact (or when the run
         // ends first, which the resume then reuses).
-        run_killed_when(&dir, || committed(&dir, stage) > 0);
+        run_killed_when(&dir, || {
+            count_files_ending(&dir.join("cache").join(stage), ".manifest.yaml") > 0
+        });
         let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], &dir);
         assert!(ok, "{stage}: {err}");
         let (out, cache) = (

@@ -23,7 +23,7 @@ pub enum Surface {
 
 impl Surface {
     /// The stage (and its folder) that makes it.
-    pub fn stage(self) -> &'static str {
+    pub const fn stage(self) -> &'static str {
         match self {
             Surface::Hull => "visual_hull",
             Surface::Refined => "graphcut",

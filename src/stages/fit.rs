@@ -51,9 +51,6 @@ pub struct Settings {
     pub photo: bool,
 }
 
-/// The stage's name.
-const STAGE_NAME: &str = fitted::STAGE;
-
 /// The stage.
 pub static STAGE: InOrder<Settings> = InOrder { resolve, compute };
 
@@ -177,7 +174,7 @@ pub fn track_in_memory(
     params: &crate::fit::FitParams,
     progress: &dyn Fn(u32),
 ) -> Result<Tracked> {
-    let fit = super::find(STAGE_NAME)?;
+    let fit = super::find(fitted::STAGE)?;
     let inputs = ctx.inputs(fit);
     let settings = Settings {
         fit: params.clone(),

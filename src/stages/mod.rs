@@ -340,7 +340,7 @@ pub struct Finished {
 /// All stages, in pipeline order.
 pub const STAGES: &[StageDef] = &[
     StageDef {
-        name: "silhouette",
+        name: crate::artifacts::silhouettes::STAGE,
         scope: Scope::PerFrame,
         about: "foreground masks: given masks, or background subtraction",
         inputs: &[],
@@ -350,7 +350,7 @@ pub const STAGES: &[StageDef] = &[
         finish: None,
     },
     StageDef {
-        name: "visual_hull",
+        name: Surface::Hull.stage(),
         scope: Scope::PerFrame,
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
@@ -360,7 +360,7 @@ pub const STAGES: &[StageDef] = &[
         finish: None,
     },
     StageDef {
-        name: "graphcut",
+        name: Surface::Refined.stage(),
         scope: Scope::PerFrame,
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["silhouette", "visual_hull"],
@@ -370,7 +370,7 @@ pub const STAGES: &[StageDef] = &[
         finish: None,
     },
     StageDef {
-        name: "reliability",
+        name: crate::artifacts::observation::STAGE,
         scope: Scope::PerFrame,
         about: "ZNCC photo-consistency and rho_p of every refined surface vertex",
         inputs: &["graphcut"],
@@ -380,7 +380,7 @@ pub const STAGES: &[StageDef] = &[
         finish: None,
     },
     StageDef {
-        name: "model",
+        name: crate::artifacts::body_model::STAGE,
         scope: Scope::Reference,
         about: "skin-bone body model from the reference frame's surface and the skeleton",
         inputs: &["silhouette", "graphcut"],
@@ -390,7 +390,7 @@ pub const STAGES: &[StageDef] = &[
         finish: None,
     },
     StageDef {
-        name: "fit",
+        name: crate::artifacts::fitted::STAGE,
         scope: Scope::Tracked,
         about: "robust articulated fitting of the body model to every frame, tracked from t0",
         inputs: &["silhouette", "reliability", "model"],
@@ -412,13 +412,14 @@ pub fn find(name: &str) -> Result<&'static StageDef> {
     })
 }
 
-/// Why `frame`'s hull is empty, from its silhouettes (for the model's and the skeleton's
-/// errors, which meet the empty surface later).
-pub fn why_hull_is_empty(inputs: &Inputs, frame: u32) -> String {
-    match inputs.silhouettes(frame) {
-        Ok(masks) => {
-            crate::recon::silhouette::Coverage::of(&inputs.sequence.cameras, &masks).why_empty()
-        }
+/// Why a frame's hull is empty, from its silhouettes `masks` as read (for the model's and
+/// the skeleton's errors, which meet the empty surface later).
+pub fn why_hull_is_empty(
+    cameras: &[crate::camera::Camera],
+    masks: Result<Vec<image::GrayImage>>,
+) -> String {
+    match masks {
+        Ok(masks) => crate::recon::silhouette::Coverage::of(cameras, &masks).why_empty(),
         Err(e) => format!("its silhouettes cannot be read ({e})"),
     }
 }

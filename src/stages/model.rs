@@ -135,7 +135,10 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
     let model = build(&skeleton, &mesh, &params).map_err(|m| {
         let source = s.mesh.clone().unwrap_or_else(|| skeleton_path.clone());
         let m = if mesh.vertices.is_empty() {
-            format!("{m}: {}", super::why_hull_is_empty(inputs, frame))
+            format!(
+                "{m}: {}",
+                super::why_hull_is_empty(&inputs.sequence.cameras, inputs.silhouettes(frame))
+            )
         } else {
             m.0
         };

@@ -493,3 +493,13 @@ pub fn run_killed_when(dir: &Path, reached: impl Fn() -> bool) {
     let _ = child.kill();
     let _ = child.wait();
 }
+
+/// How many files in `dir` (not below it) have names ending with `suffix`; 0 when `dir`
+/// does not exist yet.
+pub fn count_files_ending(dir: &Path, suffix: &str) -> usize {
+    std::fs::read_dir(dir).map_or(0, |d| {
+        d.flatten()
+            .filter(|e| e.file_name().to_string_lossy().ends_with(suffix))
+            .count()
+    })
+}
