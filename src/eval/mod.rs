@@ -14,8 +14,9 @@
 
 use crate::artifacts::reconstruction::{self, Surface};
 use crate::error::{Error, Result};
+use crate::geometry::cell_grid::CellGrid;
 use crate::geometry::grid::GridSpec;
-use crate::geometry::nearest::NearestTree;
+use crate::geometry::nearest::{key, NearestTree};
 use crate::geometry::TriMesh;
 use crate::runner::Job;
 use nalgebra::Vector3;
@@ -146,14 +147,17 @@ pub fn score(recon: &TriMesh, grid: &GridSpec, sdf: &[f32], truth: &TruthSamples
     let outside = signed.iter().filter(|&&x| x > 0.0).count();
     let points = &truth.points;
     let share = |n: usize| n as f64 / points.len().max(1) as f64;
-    let recon_index = NearestTree::new(&sample_surface(recon, SAMPLE_SPACING));
+    // Completeness asks only whether some sample lies within a voxel: a grid of
+    // voxel-sized cells answers from the few cells that ball touches, at the first sample
+    // found.
+    let recon_keys: Vec<[f32; 3]> = sample_surface(recon, SAMPLE_SPACING)
+        .iter()
+        .map(key)
+        .collect();
+    let recon_cells = CellGrid::new(&recon_keys, grid.voxel);
     let near = points
         .par_iter()
-        .filter(|p| {
-            recon_index
-                .nearest(p)
-                .is_some_and(|(_, d2)| d2 <= grid.voxel * grid.voxel)
-        })
+        .filter(|p| recon_cells.any_within(&key(p), grid.voxel))
         .count();
     let inside = points
         .par_iter()

@@ -40,6 +40,16 @@ pub enum TwoNearest {
     Unsure,
 }
 
+/// Which cells a ball touches.
+enum Cells {
+    /// The ball lies wholly outside the grid's box.
+    None,
+    /// More than [`MAX_VISITED`] cells.
+    TooMany,
+    /// An inclusive range of cell coordinates per axis.
+    Range([(usize, usize); 3]),
+}
+
 /// Points sorted into cubic cells over their bounding box.
 #[derive(Debug, Default)]
 pub struct CellGrid {
@@ -133,10 +143,9 @@ impl CellGrid {
         (c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]
     }
 
-    /// The nearest and second-nearest points within `radius` metres of `q`, as the k-d
-    /// tree's bounded two-nearest search answers them (see [`TwoNearest`]).
-    pub fn nearest_two_within(&self, q: &[f32; 3], radius: f64) -> TwoNearest {
-        let r2 = (radius * radius) as f32 as f64;
+    /// The cells (an inclusive range per axis) that hold every point within `radius`
+    /// metres of `q`.
+    fn cells_within(&self, q: &[f32; 3], radius: f64) -> Cells {
         // Every point within the radius lies in these cells (a little slack for rounding;
         // every point lies in the box, so clamping the range to the grid loses none, and a
         // ball wholly outside the box finds none).
@@ -147,14 +156,57 @@ impl CellGrid {
             let (from, to) = (x - reach, x + reach);
             let last = self.origin[a] + self.size * self.dims[a] as f64;
             if to < self.origin[a] - self.size || from > last + self.size || !x.is_finite() {
-                return TwoNearest::None;
+                return Cells::None;
             }
             *r = (self.coordinate(from, a), self.coordinate(to, a));
         }
         let visited: usize = range.iter().map(|(a, b)| b - a + 1).product();
         if visited > MAX_VISITED {
-            return TwoNearest::Unsure;
+            return Cells::TooMany;
         }
+        Cells::Range(range)
+    }
+
+    /// Whether any point lies within `radius` metres of `q` (the tree's inclusive test on
+    /// the f32 squared radius); stops at the first one found, the query's own cell first.
+    pub fn any_within(&self, q: &[f32; 3], radius: f64) -> bool {
+        let r2 = (radius * radius) as f32 as f64;
+        let near = |cell: usize| {
+            let (from, to) = (self.starts[cell] as usize, self.starts[cell + 1] as usize);
+            self.sorted[from..to]
+                .iter()
+                .any(|p| key_distance2(q, p) <= r2)
+        };
+        let range = match self.cells_within(q, radius) {
+            Cells::None => return false,
+            Cells::TooMany => return self.sorted.iter().any(|p| key_distance2(q, p) <= r2),
+            Cells::Range(range) => range,
+        };
+        let own = self.cell_index(q);
+        if range.iter().enumerate().all(|(a, &(lo, hi))| {
+            let c = self.coordinate(q[a] as f64, a);
+            lo <= c && c <= hi
+        }) && near(own)
+        {
+            return true;
+        }
+        (range[2].0..=range[2].1).any(|z| {
+            (range[1].0..=range[1].1).any(|y| {
+                let row = (z * self.dims[1] + y) * self.dims[0];
+                (range[0].0..=range[0].1).any(|x| near(row + x))
+            })
+        })
+    }
+
+    /// The nearest and second-nearest points within `radius` metres of `q`, as the k-d
+    /// tree's bounded two-nearest search answers them (see [`TwoNearest`]).
+    pub fn nearest_two_within(&self, q: &[f32; 3], radius: f64) -> TwoNearest {
+        let r2 = (radius * radius) as f32 as f64;
+        let range = match self.cells_within(q, radius) {
+            Cells::None => return TwoNearest::None,
+            Cells::TooMany => return TwoNearest::Unsure,
+            Cells::Range(range) => range,
+        };
         let mut two = TwoSmallest::new();
         for z in range[2].0..=range[2].1 {
             for y in range[1].0..=range[1].1 {
@@ -191,7 +243,8 @@ mod tests {
 
     /// Every answer equals the k-d tree's bounded two-nearest search, on scattered points
     /// and on a lattice with repeated points (ties, which must answer `Unsure`), for radii
-    /// from a millimetre to beyond the grid, with queries inside and outside the box.
+    /// from a millimetre to beyond the grid, with queries inside and outside the box; and
+    /// `any_within` always agrees with whether the tree finds a point.
     #[test]
     fn agrees_with_the_tree() {
         let mut rnd = crate::rng::chained_uniform(5);
@@ -217,6 +270,11 @@ mod tests {
                 let q: [f32; 3] = std::array::from_fn(|_| (rnd() * spread - 0.11) as f32);
                 let radius = [0.001, 0.004, 0.012, 0.03, 2.0][i % 5];
                 let truth = tree.nearest_two_within(&q, radius);
+                assert_eq!(
+                    grid.any_within(&q, radius),
+                    truth.is_some(),
+                    "{q:?} within {radius}"
+                );
                 match grid.nearest_two_within(&q, radius) {
                     TwoNearest::Found(item, d2, second2) => {
                         assert_eq!(Some((item, d2, second2)), truth, "{q:?} within {radius}")
@@ -229,5 +287,6 @@ mod tests {
         assert!((100..3000).contains(&unsure), "{unsure} unsure answers");
         let empty = CellGrid::new(&[], 0.01);
         assert_eq!(empty.nearest_two_within(&[0.0; 3], 1.0), TwoNearest::None);
+        assert!(!empty.any_within(&[0.0; 3], 1.0));
     }
 }
