@@ -51,6 +51,9 @@ pub struct Written {
     /// Each left limb's length against its right one's, metres: (left top bone, left,
     /// right).
     pub limb_lengths: Vec<(String, f64, f64)>,
+    /// The share of the surface far from every bone
+    /// ([`crate::skeleton::embed::Embedding::uncovered_share`]).
+    pub uncovered_share: f64,
 }
 
 /// A frame `pipeline skeleton` examined.
@@ -67,10 +70,13 @@ struct Scored {
     skeleton: Skeleton,
     /// The share of (joint, camera) pairs whose joint projects inside the camera's
     /// silhouette (dilated by [`MASK_SLACK_PX`]), less the share of the surface the bones
-    /// leave unexplained: 1 for a skeleton every view agrees with.
+    /// leave unexplained and less the largest left/right limb length difference (a share
+    /// of the longer): 1 for a symmetric skeleton every view agrees with.
     score: f64,
     /// The joint the fewest silhouettes hold, and how many do ([`Written::least_seen_joint`]).
     least_seen_joint: (String, usize),
+    /// [`Written::uncovered_share`].
+    uncovered_share: f64,
 }
 
 /// One examined frame.
@@ -156,9 +162,16 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
             let views = joint_views(&job.sequence.cameras, &masks, &e.skeleton);
             let seen: usize = views.iter().map(|v| v.1).sum();
             let agreement = seen as f64 / (views.len() * masks.len()).max(1) as f64;
+            // Left and right limbs of one length are a body's; a larger difference is a
+            // limb followed into the wrong part.
+            let asymmetry = limb_lengths(&e.skeleton)
+                .iter()
+                .map(|(_, l, r)| (l - r).abs() / l.max(*r).max(1e-9))
+                .fold(0.0, f64::max);
             Ok(Scored {
                 skeleton: e.skeleton,
-                score: agreement - e.uncovered_share,
+                score: agreement - e.uncovered_share - asymmetry,
+                uncovered_share: e.uncovered_share,
                 least_seen_joint: views.into_iter().min_by_key(|v| v.1).unwrap_or_default(),
             })
         }
@@ -290,6 +303,7 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
     };
     let mut skeleton = chosen.skeleton.clone();
     let least_seen_joint = chosen.least_seen_joint.clone();
+    let uncovered_share = chosen.uncovered_share;
     skeleton.reference_frame = frame;
     let out = job.config.output.join("skeleton");
     crate::fsutil::create_dir_all(&out)?;
@@ -315,6 +329,7 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
     Ok(Written {
         least_seen_joint,
         limb_lengths,
+        uncovered_share,
         skeleton: path,
         bones_ply,
         overlay,

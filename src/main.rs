@@ -635,7 +635,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             let template = hullpose::autoskeleton::Template::parse(&template);
             let w = hullpose::autoskeleton::make(&job, &template, frame, force)?;
             if w.candidates.len() > 1 {
-                println!("frames examined (score: the share of joints every view's silhouette holds, less the surface left unexplained):");
+                println!("frames examined (score: the share of joints every view's silhouette holds, less the surface left unexplained and the left/right limb difference):");
                 for c in &w.candidates {
                     match &c.outcome {
                         Ok(score) => println!("  frame {:>5}: score {score:.3}", c.frame),
@@ -665,6 +665,20 @@ fn run(cli: Cli) -> hullpose::Result<()> {
                     100.0 * left,
                     100.0 * right,
                     100.0 * (left - right) / left.max(*right)
+                );
+            }
+            println!(
+                "{:.0}% of the surface lies far from every bone",
+                100.0 * w.uncovered_share
+            );
+            if w.uncovered_share > hullpose::skeleton::embed::UNCOVERED_WARN {
+                eprintln!(
+                    "warning: {:.0}% of frame {}'s surface lies far from every bone: phantom \
+                     volume (few cameras), a dress, or a limb the template could not follow \
+                     (hands on the hips, crossed arms); check the overlay below, or choose a \
+                     frame where the arms and legs stand clear of the torso with --frame",
+                    100.0 * w.uncovered_share,
+                    w.frame
                 );
             }
             println!("wrote {}", w.skeleton.display());
