@@ -278,20 +278,34 @@ pub enum Format {
     /// PNG overlays of the fitted skeleton and the silhouette outline on the input frames,
     /// and a contact sheet of all cameras per frame.
     Overlay,
+    /// TRC (OpenSim's marker file): every joint per frame, millimetres, +Y up.
+    Trc,
+    /// C3D: every joint per frame as a 3D point, millimetres, +Y up.
+    C3d,
 }
 
 impl Format {
-    pub const ALL: [Format; 5] = [
+    pub const ALL: [Format; 7] = [
         Format::Glb,
         Format::Bvh,
         Format::Ply,
         Format::Obj,
         Format::Overlay,
+        Format::Trc,
+        Format::C3d,
     ];
 
     /// Whether the format needs the fitted motion (a skeleton).
     pub fn needs_motion(self) -> bool {
-        matches!(self, Format::Glb | Format::Bvh | Format::Overlay)
+        matches!(
+            self,
+            Format::Glb | Format::Bvh | Format::Overlay | Format::Trc | Format::C3d
+        )
+    }
+
+    /// Whether the format times the motion (needs `export.frame_rate`).
+    pub fn is_timed(self) -> bool {
+        matches!(self, Format::Glb | Format::Bvh | Format::Trc | Format::C3d)
     }
 }
 

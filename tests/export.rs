@@ -1,10 +1,11 @@
 //! Exports of the bundled sample: the .glb passes the Khronos glTF-Validator and its
 //! animation reproduces joints.csv; an independent BVH reader (bvhio) puts every joint where
-//! joints.csv has it; PLY / OBJ meshes read back whole with their attributes; overlays and
+//! joints.csv has it, and so do OpenSim (the TRC) and ezc3d (the C3D); PLY / OBJ meshes read back whole with their attributes; overlays and
 //! contact sheets are written; `pipeline export` rewrites a format from the cache alone.
 //!
 //! The external checkers (tools/validate_gltf.cjs with npm's gltf-validator under
-//! tools/node_modules, tools/check_bvh.py with PyPI's bvhio) are installed by `.ci/run`;
+//! tools/node_modules, tools/check_bvh.py with PyPI's bvhio, tools/check_markers.py with
+//! PyPI's opensim and ezc3d) are installed by `.ci/run`;
 //! with `HULLPOSE_EXTERNAL_CHECKS=1` (as CI sets it) a missing checker fails the test,
 //! otherwise it is skipped with a note.
 
@@ -31,7 +32,7 @@ fn sample_run() -> &'static Path {
             .replace("frames: all", "frames: 0..2")
             .replace(
                 "export:\n",
-                "export:\n  formats: [glb, bvh, ply, obj, overlay]\n",
+                "export:\n  formats: [glb, bvh, ply, obj, overlay, trc, c3d]\n",
             );
         assert!(
             yaml.contains("up_axis: +z"),
@@ -237,6 +238,42 @@ fn bvh_read_by_bvhio_matches_the_joints() {
     )
     .unwrap();
     assert!(!wrong, "{report}");
+}
+
+#[test]
+fn trc_read_by_opensim_and_c3d_read_by_ezc3d_match_the_joints() {
+    let dir = sample_run();
+    let joints = dir.join("output/joints.csv");
+    let script = repo_tools().join("check_markers.py");
+    for (file, reader) in [("tripod.trc", "opensim"), ("tripod.c3d", "ezc3d")] {
+        let path = dir.join("output/export").join(file);
+        let check = |up: &str| {
+            external(
+                "python3",
+                &[
+                    script.to_str().unwrap(),
+                    path.to_str().unwrap(),
+                    joints.to_str().unwrap(),
+                    "--up",
+                    up,
+                    "--tolerance",
+                    "0.0001",
+                ],
+                &["-c", &format!("import {reader}")],
+            )
+        };
+        let Some((ok, report)) = check("+z") else {
+            continue;
+        };
+        // Every joint of every frame within 0.1 mm, in millimetres as declared.
+        assert!(
+            ok && report.contains("frames 3 markers 9 units mm"),
+            "{file}: {report}"
+        );
+        // The check can fail: read with the wrong up axis, the joints are far off.
+        let (wrong, report) = check("+y").unwrap();
+        assert!(!wrong, "{file}: {report}");
+    }
 }
 
 #[test]

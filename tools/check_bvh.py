@@ -18,15 +18,7 @@ import sys
 import bvhio
 import glm
 
-# Rows of C (world -> export axes) per up axis, as src/export/axes.rs.
-TO_Y_UP = {
-    "+y": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
-    "-y": [[1, 0, 0], [0, -1, 0], [0, 0, -1]],
-    "+z": [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
-    "-z": [[1, 0, 0], [0, 0, -1], [0, 1, 0]],
-    "+x": [[0, -1, 0], [1, 0, 0], [0, 0, 1]],
-    "-x": [[0, 1, 0], [-1, 0, 0], [0, 0, 1]],
-}
+from export_axes import TO_Y_UP
 
 
 def to_world(p, up):

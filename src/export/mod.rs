@@ -1,15 +1,17 @@
 //! Exports for other tools: the skinned model and its motion as glTF 2.0 binary (.glb), the
-//! motion as BVH, every reconstruction's meshes as PLY and OBJ, and overlay pictures of the
+//! motion as BVH, the joints as markers (TRC, C3D), every reconstruction's meshes as PLY and OBJ, and overlay pictures of the
 //! fitted skeleton on the input frames. All are written from the cache, nothing is
 //! recomputed: `pipeline run` writes them after the fit (stage `export`), and
 //! `pipeline export FILE --format F` rewrites one format from what the cache holds.
 //!
-//! Layout under `<output>/export/`: `<sequence>.glb`, `<sequence>.bvh`,
+//! Layout under `<output>/export/`: `<sequence>.glb`, `<sequence>.bvh`, `<sequence>.trc`,
+//! `<sequence>.c3d`,
 //! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit) and
 //! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `overlays/contact/NNNNNN.png`.
 
 pub mod bvh;
 pub mod gltf;
+pub mod markers;
 pub mod meshes;
 pub mod overlays;
 
@@ -127,14 +129,10 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
             .sum::<usize>();
     }
     let animation_rate = p.frame_rate.unwrap_or(crate::config::ANIMATION_RATE);
-    if p.frame_rate.is_none()
-        && formats
-            .iter()
-            .any(|f| matches!(f, Format::Glb | Format::Bvh))
-    {
+    if p.frame_rate.is_none() && formats.iter().any(|f| f.is_timed()) {
         written.warnings.push(format!(
-            "export.frame_rate is unset: glb and bvh are timed at {} frames per second (set it \
-             to the capture's rate)",
+            "export.frame_rate is unset: glb, bvh, trc and c3d are timed at {} frames per \
+             second (set it to the capture's rate)",
             crate::config::ANIMATION_RATE
         ));
     }
@@ -155,6 +153,25 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
                 let path = out.join(format!("{name}.bvh"));
                 let text = bvh::to_bvh(&model.skeleton, poses, animation_rate, p.up_axis, order);
                 crate::fsutil::write_atomic(&path, text.as_bytes())?;
+                written.outputs.push(path);
+                written.files += 1;
+            }
+            Format::Trc => {
+                let (model, poses) = motion.as_ref().expect("loaded");
+                let file = format!("{name}.trc");
+                let path = out.join(&file);
+                let text =
+                    markers::to_trc(&file, &model.skeleton, poses, animation_rate, p.up_axis);
+                crate::fsutil::write_atomic(&path, text.as_bytes())?;
+                written.outputs.push(path);
+                written.files += 1;
+            }
+            Format::C3d => {
+                let (model, poses) = motion.as_ref().expect("loaded");
+                let path = out.join(format!("{name}.c3d"));
+                let bytes = markers::to_c3d(&model.skeleton, poses, animation_rate, p.up_axis)
+                    .map_err(|m| Error::invalid(&path, m))?;
+                crate::fsutil::write_atomic(&path, &bytes)?;
                 written.outputs.push(path);
                 written.files += 1;
             }
