@@ -56,6 +56,10 @@ enum Command {
         /// from it (height within 15%, legs, torso, arms and width each within 7% more).
         #[arg(long, default_value_t = 0)]
         body: u64,
+        /// The humanoid wears a dress: a skirt from the waist to above the knees that fuses
+        /// the thighs into one volume and swings with the legs.
+        #[arg(long)]
+        dress: bool,
     },
     /// Run the pipeline: compute what is stale, reuse what the cache holds.
     Run {
@@ -563,9 +567,11 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             mesh_spacing,
             motion,
             body,
+            dress,
         } => {
             let mut opts = SynthOptions::new(scene, out);
             opts.motion = motion;
+            opts.dress = dress;
             if body != 0 {
                 opts.proportions = hullpose::synth::humanoid::Proportions::from_seed(body);
             }

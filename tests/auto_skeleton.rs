@@ -129,17 +129,20 @@ fn tracking_from_the_automatic_skeleton_stays_within_two_and_a_half_centimetres(
     assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
 }
 
-/// The humanoid stands with its arms hanging against its hips for the first ten frames
-/// (`--motion arms-down`; no open pose before the tenth frame): `pipeline skeleton` still
-/// embeds the template within 3 cm of the truth at the frame it picks, and tracking from it
-/// covers every frame within 2.5 cm.
+/// The humanoid in a dress (`--dress`: a skirt that fuses the thighs to above the knees
+/// and swings with the legs) stands with its arms hanging against its hips for the first
+/// ten frames (`--motion arms-down`; no open pose before the tenth frame): `pipeline
+/// skeleton` still embeds the template within 3 cm on average and 5 cm at worst of the
+/// truth at the frame it picks (the bounds for a dress: 4 and 8), and tracking
+/// from it covers every frame within 2.5 cm (bound 3).
 #[test]
-fn a_sequence_without_an_open_pose_at_its_start_is_embedded_and_tracked() {
+fn a_dress_and_no_open_pose_at_the_start_are_embedded_and_tracked() {
     let dir = process_tempdir();
     let d = dir.path();
     let mut options = SynthOptions::new(SceneKind::Humanoid, d);
     (options.cameras, options.width, options.height) = (8, 640, 480);
     options.motion = hullpose::synth::Motion::ArmsDown;
+    options.dress = true;
     hullpose::synth::generate(&options).unwrap();
     // Frames 0..15: arms down to frame 9, open at 13, towards the crossed forearms after.
     let yaml = std::fs::read_to_string(d.join("pipeline.yaml")).unwrap();

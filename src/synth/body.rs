@@ -23,6 +23,31 @@ pub struct Body {
     pub plain: Vec<bool>,
     /// Smooth-union blend distance between neighbouring cones, metres.
     pub blend: f64,
+    /// A skirt around the thighs, if the body wears one.
+    pub skirt: Option<Skirt>,
+}
+
+/// A skirt at rest: a truncated cone about the vertical, from the waist down, which fuses
+/// the thighs into one volume (it is skinned like the flesh, so it swings with the legs).
+#[derive(Debug, Clone)]
+pub struct Skirt {
+    /// The centre of its top (the waist), metres.
+    pub top: Vector3<f64>,
+    /// Its length down from the top, metres.
+    pub length: f64,
+    /// Its radius at the top and at the hem, metres.
+    pub radii: (f64, f64),
+}
+
+impl Skirt {
+    /// Signed distance (approximate, negative inside) at rest.
+    fn distance(&self, p: &Vector3<f64>) -> f64 {
+        let below = self.top.z - p.z;
+        let t = (below / self.length).clamp(0.0, 1.0);
+        let radius = self.radii.0 + t * (self.radii.1 - self.radii.0);
+        let radial = (p.xy() - self.top.xy()).norm() - radius;
+        radial.max(-below).max(below - self.length)
+    }
 }
 
 /// A pose: per bone, its rotation relative to the rest pose (world frame), and the root's
@@ -92,7 +117,7 @@ impl Body {
 
     /// Signed distance to the rest surface (negative inside).
     pub fn rest_distance(&self, p: &Vector3<f64>) -> f64 {
-        (0..self.skeleton.bones.len())
+        let flesh = (0..self.skeleton.bones.len())
             .map(|b| self.cone_distance(b, p))
             .fold(f64::INFINITY, |acc, d| {
                 if acc.is_infinite() {
@@ -100,7 +125,11 @@ impl Body {
                 } else {
                     smooth_min(acc, d, self.blend)
                 }
-            })
+            });
+        match &self.skirt {
+            Some(skirt) => flesh.min(skirt.distance(p)),
+            None => flesh,
+        }
     }
 
     /// The rest surface: the zero level of [`Body::rest_distance`] meshed at `spacing`.
@@ -113,6 +142,12 @@ impl Body {
                 lo = lo.inf(&(p - Vector3::repeat(r)));
                 hi = hi.sup(&(p + Vector3::repeat(r)));
             }
+        }
+        if let Some(skirt) = &self.skirt {
+            let r = Vector3::new(skirt.radii.1, skirt.radii.1, 0.0);
+            let hem = skirt.top - Vector3::z() * skirt.length;
+            lo = lo.inf(&(hem - r));
+            hi = hi.sup(&(skirt.top + r));
         }
         let margin = Vector3::repeat(2.0 * spacing);
         let grid = ScalarGrid::sample(lo - margin, hi + margin, spacing, |p| self.rest_distance(p));

@@ -249,6 +249,27 @@ fn body(proportions: Proportions) -> Body {
         radii: defs.iter().map(|d| (d.4, d.5)).collect(),
         plain: defs.iter().map(|d| d.6).collect(),
         blend: 0.02,
+        skirt: None,
+    }
+}
+
+/// A skirt for `body`: from 5 cm above the hips to 70% of the way down the thighs, wide
+/// enough at the top to hold both thighs' flesh and flaring by 6 cm to the hem.
+fn skirt(body: &Body) -> super::body::Skirt {
+    let bone = |n: &str| body.skeleton.bone_index(n).expect("known bone");
+    let (l, r) = (bone("thigh_l"), bone("thigh_r"));
+    let (hl, hr) = (&body.skeleton.bones[l], &body.skeleton.bones[r]);
+    let centre = 0.5 * (hl.head + hr.head);
+    let half_width = 0.5 * (hl.head - hr.head).norm();
+    let thigh = body.radii[l].0.max(body.radii[r].0);
+    let knee = 0.5 * (hl.tail.z + hr.tail.z);
+    let top = centre + Vector3::z() * 0.05;
+    let length = (top.z - knee) * 0.7 + 0.05 * 0.3;
+    let radius = half_width + thigh + 0.01;
+    super::body::Skirt {
+        top,
+        length,
+        radii: (radius, radius + 0.06),
     }
 }
 
@@ -460,16 +481,18 @@ fn blend(a: &Pose, b: &Pose, t: f64) -> Pose {
 type Key<'a> = (f64, &'a Pose, Vec<(usize, usize)>);
 
 /// Builds the humanoid scene with `frames` frames sampled over the motion.
-pub fn scene(
-    cameras: usize,
-    width: u32,
-    height: u32,
-    frames: usize,
-    seed: u64,
-    motion: super::Motion,
-    proportions: Proportions,
-) -> Scene {
-    let mut body = body(proportions);
+pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
+    let (cameras, width, height, seed, motion) = (
+        opts.cameras,
+        opts.width,
+        opts.height,
+        opts.seed,
+        opts.motion,
+    );
+    let mut body = body(opts.proportions);
+    if opts.dress {
+        body.skirt = Some(skirt(&body));
+    }
     let bone = |n: &str| body.skeleton.bone_index(n).expect("known bone");
     let down = arms_down(&body);
     let (a, hips, cross, knee, step) = (

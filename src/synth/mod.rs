@@ -134,6 +134,8 @@ pub struct SynthOptions {
     pub motion: Motion,
     /// The humanoid's proportions (`--body SEED`: [`humanoid::Proportions::from_seed`]).
     pub proportions: humanoid::Proportions,
+    /// Whether the humanoid wears a dress (`--dress`: [`body::Skirt`]).
+    pub dress: bool,
 }
 
 impl SynthOptions {
@@ -151,6 +153,7 @@ impl SynthOptions {
             first_frame: 0,
             motion: Motion::Default,
             proportions: Default::default(),
+            dress: false,
         }
     }
 }
@@ -176,6 +179,9 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     if opts.proportions != humanoid::Proportions::default() && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--body needs --scene humanoid".into()));
     }
+    if opts.dress && opts.scene != SceneKind::Humanoid {
+        return Err(Error::Usage("--dress needs --scene humanoid".into()));
+    }
     if opts.motion != Motion::Default && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage(
             "--motion dance and --motion arms-down need --scene humanoid".into(),
@@ -189,15 +195,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
             opts.frames.unwrap_or(tripod::KEY_FRAMES),
             opts.seed,
         ),
-        SceneKind::Humanoid => humanoid::scene(
-            opts.cameras,
-            opts.width,
-            opts.height,
-            opts.frames.unwrap_or(key_frames(opts).0),
-            opts.seed,
-            opts.motion,
-            opts.proportions,
-        ),
+        SceneKind::Humanoid => humanoid::scene(opts, opts.frames.unwrap_or(key_frames(opts).0)),
     })
 }
 

@@ -87,6 +87,7 @@ fn body() -> Body {
         radii,
         plain: vec![false; 6],
         blend: 0.03,
+        skirt: None,
     }
 }
 
