@@ -65,7 +65,6 @@ def main():
     if len(order) != len(frames):
         print(f"{len(frames)} frames in the file, {len(order)} in joints.csv")
         return 1
-    # The children starting at each bone's tail are found by name from the markers.
     worst = 0.0
     for r in rows:
         marks = {n: world(p) for n, p in frames[order.index(int(r["frame"]))].items()}
@@ -76,6 +75,7 @@ def main():
             return 1
         worst = max(worst, max(abs(u - v) for u, v in zip(marks[r["bone"]], head)))
         name = f"{r['bone']}_tail"
+        # A tail without a marker of its own is a child's head: the nearest marker.
         if name in marks:
             d = max(abs(u - v) for u, v in zip(marks[name], tail))
         else:

@@ -21,6 +21,23 @@ use std::fmt::Write as _;
 /// Distance under which a child's head counts as its parent's tail, metres.
 const SAME_POINT: f64 = 1e-6;
 
+/// A bone's name as a joint name (whitespace turned to `_`), in the BVH and the marker
+/// files alike.
+pub(super) fn joint_name(bone: &str) -> String {
+    bone.chars()
+        .map(|ch| if ch.is_whitespace() { '_' } else { ch })
+        .collect()
+}
+
+/// Whether one of bone `b`'s `children` starts at its tail (the tail is then that child's
+/// joint, not one of its own).
+pub(super) fn tail_is_a_head(skeleton: &Skeleton, children: &[usize], b: usize) -> bool {
+    let tail = skeleton.bones[b].tail;
+    children
+        .iter()
+        .any(|&ch| (skeleton.bones[ch].head - tail).norm() <= SAME_POINT)
+}
+
 /// Writes the HIERARCHY section, depth first: the order in which MOTION lists channels.
 struct Hierarchy<'a> {
     skeleton: &'a Skeleton,
@@ -35,11 +52,7 @@ struct Hierarchy<'a> {
 
 impl Hierarchy<'_> {
     fn name(&self, b: usize) -> String {
-        self.skeleton.bones[b]
-            .name
-            .chars()
-            .map(|ch| if ch.is_whitespace() { '_' } else { ch })
-            .collect()
+        joint_name(&self.skeleton.bones[b].name)
     }
 
     fn line(&mut self, depth: usize, s: &str) {
@@ -81,10 +94,7 @@ impl Hierarchy<'_> {
             for &ch in &children {
                 self.joint(ch, depth + 1);
             }
-            let tail_is_a_head = children
-                .iter()
-                .any(|&ch| (self.skeleton.bones[ch].head - bone.tail).norm() <= SAME_POINT);
-            if !tail_is_a_head {
+            if !tail_is_a_head(self.skeleton, &children, b) {
                 self.line(depth + 1, &format!("JOINT {}_tail", self.name(b)));
                 self.line(depth + 1, "{");
                 self.line(depth + 2, &format!("OFFSET {}", v3(&tail)));

@@ -3,18 +3,15 @@
 //!
 //! A marker is a joint of joints.csv, named as in the BVH export: each bone's head (named
 //! as the bone) and each tail that is no child's head (`<bone>_tail`), so a chain's joints
-//! appear once. Both
-//! files hold millimetres in the export axes (+Y up when `export.up_axis` is known, as
-//! OpenSim expects; [`crate::geometry::axes::to_y_up`]), one row per fitted frame, timed
-//! at the capture's frame rate (frame f at f / rate seconds).
+//! appear once. Both files hold millimetres in the export axes (+Y up when
+//! `export.up_axis` is known, as OpenSim expects; [`crate::geometry::axes::to_y_up`]), one
+//! row per fitted frame, timed at the capture's frame rate (frame f at f / rate seconds).
 
+use super::bvh::{joint_name, tail_is_a_head};
 use crate::geometry::axes::{to_y_up, UpAxis};
 use crate::skeleton::{Pose, Skeleton};
 use nalgebra::Vector3;
 use std::fmt::Write as _;
-
-/// Distance under which a child's head counts as its parent's tail, metres (as in BVH).
-const SAME_POINT: f64 = 1e-6;
 
 /// Where a marker sits: bone b's head, or bone b's tail.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -27,21 +24,12 @@ enum Joint {
 /// child starts there).
 fn markers(skeleton: &Skeleton) -> Vec<(String, Joint)> {
     let children = skeleton.children();
-    let name = |b: usize| -> String {
-        skeleton.bones[b]
-            .name
-            .chars()
-            .map(|c| if c.is_whitespace() { '_' } else { c })
-            .collect()
-    };
     let mut out = Vec::new();
     for (b, bone) in skeleton.bones.iter().enumerate() {
-        out.push((name(b), Joint::Head(b)));
-        let shared_tail = children[b]
-            .iter()
-            .any(|&c| (skeleton.bones[c].head - bone.tail).norm() < SAME_POINT);
-        if !shared_tail {
-            out.push((format!("{}_tail", name(b)), Joint::Tail(b)));
+        let name = joint_name(&bone.name);
+        out.push((name.clone(), Joint::Head(b)));
+        if !tail_is_a_head(skeleton, &children[b], b) {
+            out.push((format!("{name}_tail"), Joint::Tail(b)));
         }
     }
     out
@@ -133,16 +121,6 @@ pub fn to_c3d(
     up: Option<UpAxis>,
 ) -> Result<Vec<u8>, String> {
     let markers = markers(skeleton);
-    let rows = positions(skeleton, poses, up, &markers);
-    if markers.len() > i16::MAX as usize || poses.len() > u16::MAX as usize {
-        return Err(format!(
-            "C3D holds at most {} markers and {} frames ({} and {} asked)",
-            i16::MAX,
-            u16::MAX,
-            markers.len(),
-            poses.len()
-        ));
-    }
     let first = poses.first().map_or(0, |p| p.0) as usize + 1;
     let last = first + poses.len().saturating_sub(1);
     if last > u16::MAX as usize {
@@ -151,6 +129,7 @@ pub fn to_c3d(
             u16::MAX
         ));
     }
+    // At most 255 markers (the labels' count is one byte), checked with the parameters.
     let params = parameters(&markers, poses.len(), rate, first, last)?;
     let param_blocks = params.len().div_ceil(BLOCK);
     let data_start = 2 + param_blocks;
@@ -170,6 +149,7 @@ pub fn to_c3d(
     word(&mut header, 9, 0); // analog samples per frame and channel
     header[20..24].copy_from_slice(&(rate as f32).to_le_bytes());
 
+    let rows = positions(skeleton, poses, up, &markers);
     let mut out = header;
     let mut p = params;
     p.resize(param_blocks * BLOCK, 0);

@@ -1,6 +1,6 @@
 //! Exports for other tools: the skinned model and its motion as glTF 2.0 binary (.glb), the
-//! motion as BVH, the joints as markers (TRC, C3D), every reconstruction's meshes as PLY and OBJ, and overlay pictures of the
-//! fitted skeleton on the input frames. All are written from the cache, nothing is
+//! motion as BVH, the joints as markers (TRC, C3D), every reconstruction's meshes as PLY
+//! and OBJ, and overlay pictures of the fitted skeleton on the input frames. All are written from the cache, nothing is
 //! recomputed: `pipeline run` writes them after the fit (stage `export`), and
 //! `pipeline export FILE --format F` rewrites one format from what the cache holds.
 //!
@@ -136,47 +136,40 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
             crate::config::ANIMATION_RATE
         ));
     }
+    // The one-file formats of the motion: each file's name and bytes.
     for &format in &formats {
-        match format {
+        let Some((model, poses)) = motion.as_ref() else {
+            continue;
+        };
+        let (path, bytes) = match format {
             Format::Glb => {
-                let (model, poses) = motion.as_ref().expect("loaded");
                 let path = out.join(format!("{name}.glb"));
                 let bytes = gltf::to_glb(model, poses, animation_rate, p.up_axis, &name);
-                crate::fsutil::write_atomic(&path, &bytes)?;
-                written.outputs.push(path);
-                written.files += 1;
+                (path, bytes)
             }
             Format::Bvh => {
-                let (model, poses) = motion.as_ref().expect("loaded");
                 let order = crate::geometry::axes::RotationOrder::parse(&p.bvh_rotation_order)
                     .map_err(|m| Error::invalid(&ctx.config.path, m))?;
-                let path = out.join(format!("{name}.bvh"));
                 let text = bvh::to_bvh(&model.skeleton, poses, animation_rate, p.up_axis, order);
-                crate::fsutil::write_atomic(&path, text.as_bytes())?;
-                written.outputs.push(path);
-                written.files += 1;
+                (out.join(format!("{name}.bvh")), text.into_bytes())
             }
             Format::Trc => {
-                let (model, poses) = motion.as_ref().expect("loaded");
                 let file = format!("{name}.trc");
-                let path = out.join(&file);
                 let text =
                     markers::to_trc(&file, &model.skeleton, poses, animation_rate, p.up_axis);
-                crate::fsutil::write_atomic(&path, text.as_bytes())?;
-                written.outputs.push(path);
-                written.files += 1;
+                (out.join(file), text.into_bytes())
             }
             Format::C3d => {
-                let (model, poses) = motion.as_ref().expect("loaded");
                 let path = out.join(format!("{name}.c3d"));
                 let bytes = markers::to_c3d(&model.skeleton, poses, animation_rate, p.up_axis)
                     .map_err(|m| Error::invalid(&path, m))?;
-                crate::fsutil::write_atomic(&path, &bytes)?;
-                written.outputs.push(path);
-                written.files += 1;
+                (path, bytes)
             }
-            Format::Ply | Format::Obj | Format::Overlay => {}
-        }
+            Format::Ply | Format::Obj | Format::Overlay => continue,
+        };
+        crate::fsutil::write_atomic(&path, &bytes)?;
+        written.outputs.push(path);
+        written.files += 1;
     }
     written.outputs.dedup();
     Ok(written)

@@ -182,12 +182,9 @@ impl CellGrid {
             Cells::TooMany => return self.sorted.iter().any(|p| key_distance2(q, p) <= r2),
             Cells::Range(range) => range,
         };
-        let own = self.cell_index(q);
-        if range.iter().enumerate().all(|(a, &(lo, hi))| {
-            let c = self.coordinate(q[a] as f64, a);
-            lo <= c && c <= hi
-        }) && near(own)
-        {
+        // The query's own cell lies in the range (the range's ends are the cells of
+        // coordinates either side of it).
+        if near(self.cell_index(q)) {
             return true;
         }
         (range[2].0..=range[2].1).any(|z| {

@@ -856,6 +856,7 @@ pub const UNCOVERED_SHARE: f64 = 0.35;
 /// limb the template could not follow, as hands on the hips, or phantom volume): the
 /// synthetic humanoid in an open pose leaves 4-8%.
 pub const UNCOVERED_WARN: f64 = 0.08;
+
 /// How far a surface vertex may lie beyond its nearest bone's part (the distance to the
 /// bone less the depth there, the part's radius), metres.
 pub const UNCOVERED_EXCESS: f64 = 0.05;
@@ -878,19 +879,19 @@ fn check_coverage(
         let p = h + d * s;
         (v - p).norm() - interior.at(&p).max(0.0)
     };
-    let webs = leg_webs(template, joints);
+    // Every bone, then the web between the legs, each with the bone it counts for.
+    let segments: Vec<(Vector3<f64>, Vector3<f64>, usize)> = (0..template.bones.len())
+        .map(|b| {
+            let (h, t) = joints.bone(b);
+            (h, t, b)
+        })
+        .chain(leg_webs(template, joints))
+        .collect();
     for v in surface.vertices.iter().step_by(7) {
         total += 1;
         let (mut best, mut best_bone) = (f64::INFINITY, 0);
-        for b in 0..template.bones.len() {
-            let (h, t) = joints.bone(b);
+        for &(h, t, bone) in &segments {
             let e = excess(v, h, t);
-            if e < best {
-                (best, best_bone) = (e, b);
-            }
-        }
-        for &(l, r, bone) in &webs {
-            let e = excess(v, l, r);
             if e < best {
                 (best, best_bone) = (e, bone);
             }

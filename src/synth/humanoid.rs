@@ -264,7 +264,7 @@ fn skirt(body: &Body) -> super::body::Skirt {
     let thigh = body.radii[l].0.max(body.radii[r].0);
     let knee = 0.5 * (hl.tail.z + hr.tail.z);
     let top = centre + Vector3::z() * 0.05;
-    let length = (top.z - knee) * 0.7 + 0.05 * 0.3;
+    let length = 0.05 + 0.7 * (centre.z - knee);
     let radius = half_width + thigh + 0.01;
     super::body::Skirt {
         top,
