@@ -72,6 +72,19 @@ struct PipelineFile {
     fit: FitParams,
     #[serde(default)]
     export: ExportParams,
+    #[serde(default)]
+    sync: SyncParams,
+}
+
+/// Synchronisation of cameras recorded as videos (pipeline.yaml key `sync`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SyncParams {
+    /// Frames added to a camera's frame index to find its video frame, by camera name
+    /// (`{cam03: 2}`: the capture's frame 0 is cam03's video frame 2, for a camera that
+    /// started recording 2 frames early). Cameras not named: 0. Only for cameras given as
+    /// videos (`frames/<camera>.<ext>`).
+    pub offsets: std::collections::BTreeMap<String, i64>,
 }
 
 /// Every parameter of pipeline.yaml's sections with its default, by dotted key
@@ -106,6 +119,7 @@ pub fn default_values() -> Result<Vec<(String, serde_json::Value)>> {
         ("model", serde_json::to_value(ModelParams::default())),
         ("fit", serde_json::to_value(FitParams::default())),
         ("export", serde_json::to_value(ExportParams::default())),
+        ("sync", serde_json::to_value(SyncParams::default())),
     ];
     let mut out = Vec::new();
     for (name, value) in sections {
@@ -153,6 +167,8 @@ pub struct Config {
     pub fit: FitParams,
     /// Export parameters.
     pub export: ExportParams,
+    /// Video synchronisation.
+    pub sync: SyncParams,
 }
 
 impl Config {
@@ -184,6 +200,7 @@ impl Config {
             },
             fit: file.fit,
             export: file.export,
+            sync: file.sync,
         };
         graphcut::validate(&config.graphcut).map_err(|m| Error::invalid(path, m))?;
         reliability::validate(&config.reliability).map_err(|m| Error::invalid(path, m))?;

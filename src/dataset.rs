@@ -23,8 +23,8 @@ pub struct Sequence {
     pub cameras: Vec<Camera>,
     /// Frame indices present for every camera, ascending.
     pub frames: Vec<u32>,
-    /// File extension of each camera's frames (png, jpg or jpeg).
-    frame_ext: Vec<&'static str>,
+    /// Where each camera's frames come from.
+    sources: Vec<FrameSource>,
     /// Whether given masks (`masks/`) are present.
     pub has_masks: bool,
     /// Whether the capture has frames (`frames/`); without, it is a masks-only capture: the
@@ -36,6 +36,30 @@ pub struct Sequence {
     pub warnings: Vec<String>,
     /// Read as if it had no skeleton.yaml (`pipeline skeleton --force` replacing one).
     pub skeleton_ignored: bool,
+}
+
+/// Where a camera's frames come from.
+#[derive(Debug, Clone)]
+pub enum FrameSource {
+    /// A folder of images `frames/<camera>/NNNNNN.<ext>` (png, jpg or jpeg).
+    Folder(&'static str),
+    /// A video `frames/<camera>.<ext>`, decoded into the cache; the capture's frame f is
+    /// the video's frame f + `offset` (`sync.offsets`).
+    Video {
+        decoded: crate::video::Decoded,
+        offset: i64,
+    },
+}
+
+/// How a capture's camera videos are read: where their decoded frames are cached, and
+/// each camera's frame offset (pipeline.yaml keys `cache` and `sync.offsets`).
+#[derive(Debug, Clone)]
+pub struct VideoOptions {
+    /// `<cache>/decoded`.
+    pub decoded_root: PathBuf,
+    pub offsets: std::collections::BTreeMap<String, i64>,
+    /// The pipeline file, named in messages about `sync.offsets`.
+    pub config_path: PathBuf,
 }
 
 /// The name of frame `index`'s files: the zero-padded six-digit index.
@@ -152,10 +176,28 @@ impl Sequence {
     /// calibration in messages. Checks that every calibrated camera has a frame folder
     /// holding every frame, that image sizes match the calibration (from the headers), and
     /// the same for masks when present.
-    pub fn open(dir: &Path, cameras: Vec<Camera>, calib_path: &Path) -> Result<Sequence> {
+    pub fn open(
+        dir: &Path,
+        cameras: Vec<Camera>,
+        calib_path: &Path,
+        videos: Option<&VideoOptions>,
+    ) -> Result<Sequence> {
         let masks_dir = dir.join("masks");
         let has_masks = masks_dir.is_dir();
         let has_frames = dir.join("frames").is_dir();
+        if let Some(v) = videos {
+            for name in v.offsets.keys() {
+                if !cameras.iter().any(|c| &c.name == name) {
+                    return Err(Error::invalid(
+                        &v.config_path,
+                        format!(
+                            "key 'sync.offsets': no camera of {} is named '{name}'",
+                            calib_path.display()
+                        ),
+                    ));
+                }
+            }
+        }
         // A masks-only capture lists its frames from the masks.
         let frames_dir = if has_frames || !has_masks {
             dir.join("frames")
@@ -174,8 +216,20 @@ impl Sequence {
         let mut folders: BTreeSet<String> = BTreeSet::new();
         for entry in std::fs::read_dir(&frames_dir).map_err(|e| Error::io(&frames_dir, e))? {
             let entry = entry.map_err(|e| Error::io(&frames_dir, e))?;
-            if entry.path().is_dir() {
+            let path = entry.path();
+            if path.is_dir() {
                 folders.insert(entry.file_name().to_string_lossy().into_owned());
+            } else if has_frames {
+                if let Some(stem) = path
+                    .extension()
+                    .and_then(|e| e.to_str())
+                    .filter(|e| {
+                        crate::video::VIDEO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str())
+                    })
+                    .and(path.file_stem())
+                {
+                    folders.insert(stem.to_string_lossy().into_owned());
+                }
             }
         }
         for name in &folders {
@@ -188,7 +242,68 @@ impl Sequence {
             }
         }
         let mut per_camera = Vec::with_capacity(cameras.len());
-        for cam in &cameras {
+        let mut decoded: Vec<Option<(crate::video::Decoded, i64)>> = vec![None; cameras.len()];
+        // Cameras recorded as videos, decoded (or found decoded) in parallel.
+        let video_cams: Vec<(usize, PathBuf)> = if has_frames {
+            cameras
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| !frames_dir.join(&c.name).is_dir())
+                .filter_map(|(i, c)| crate::video::find(&frames_dir, &c.name).map(|v| (i, v)))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if !video_cams.is_empty() {
+            let Some(v) = videos else {
+                return Err(Error::invalid(
+                    &video_cams[0].1,
+                    "camera videos are decoded into the pipeline's cache: open this capture \
+                     through a pipeline.yaml",
+                ));
+            };
+            use rayon::prelude::*;
+            let done: Vec<Result<(usize, crate::video::Decoded)>> = video_cams
+                .par_iter()
+                .map(|(i, path)| {
+                    crate::video::decoded(path, &cameras[*i], &v.decoded_root).map(|d| (*i, d))
+                })
+                .collect();
+            for r in done {
+                let (i, d) = r?;
+                let offset = v.offsets.get(&cameras[i].name).copied().unwrap_or(0);
+                decoded[i] = Some((d, offset));
+            }
+        }
+        if let Some(v) = videos {
+            for (name, _) in v.offsets.iter().filter(|(_, &o)| o != 0) {
+                let i = cameras
+                    .iter()
+                    .position(|c| &c.name == name)
+                    .expect("checked");
+                if decoded[i].is_none() {
+                    return Err(Error::invalid(
+                        &v.config_path,
+                        format!(
+                            "key 'sync.offsets': camera '{name}' is not recorded as a video \
+                             (frames/{name}.<ext>); offsets apply to videos only"
+                        ),
+                    ));
+                }
+            }
+        }
+        for (ci, cam) in cameras.iter().enumerate() {
+            if let Some((d, offset)) = &decoded[ci] {
+                // The capture's frames f with 0 <= f + offset < the video's frame count.
+                let first = (-offset).max(0);
+                let end = d.info.frames as i64 - offset;
+                per_camera.push(
+                    (first..end.max(first))
+                        .filter_map(|f| u32::try_from(f).ok().map(|f| (f, "png")))
+                        .collect(),
+                );
+                continue;
+            }
             let cam_dir = frames_dir.join(&cam.name);
             if !cam_dir.is_dir() {
                 return Err(Error::invalid(
@@ -209,10 +324,37 @@ impl Sequence {
                 "no frame files (NNNNNN.png) found",
             ));
         }
-        let mut frame_ext = Vec::with_capacity(cameras.len());
-        for (cam, list) in cameras.iter().zip(&per_camera) {
+        let mut sources = Vec::with_capacity(cameras.len());
+        for ((cam, list), dec) in cameras.iter().zip(&per_camera).zip(&decoded) {
             let have: BTreeSet<u32> = list.iter().map(|&(i, _)| i).collect();
             if let Some(&missing) = all.difference(&have).next() {
+                if let Some((d, offset)) = dec {
+                    let frames = |set: &BTreeSet<u32>| {
+                        format!(
+                            "{}..{}",
+                            set.first().unwrap_or(&0),
+                            set.last().unwrap_or(&0)
+                        )
+                    };
+                    return Err(Error::invalid(
+                        &d.video,
+                        format!(
+                            "camera '{}''s video holds {} frames (capture frames {}, with \
+                             offset {offset}) but other cameras have frames {}: frame \
+                             {missing} is missing. A camera that started late or stopped \
+                             early needs sync.offsets in pipeline.yaml, or trim the other \
+                             videos",
+                            cam.name,
+                            d.info.frames,
+                            if have.is_empty() {
+                                "none".to_string()
+                            } else {
+                                frames(&have)
+                            },
+                            frames(&all)
+                        ),
+                    ));
+                }
                 return Err(Error::invalid(
                     frames_dir.join(&cam.name).join(format!("{}.png", frame_stem(missing))),
                     format!(
@@ -221,7 +363,13 @@ impl Sequence {
                     ),
                 ));
             }
-            frame_ext.push(list.first().map(|&(_, e)| e).unwrap_or("png"));
+            sources.push(match dec {
+                Some((d, offset)) => FrameSource::Video {
+                    decoded: d.clone(),
+                    offset: *offset,
+                },
+                None => FrameSource::Folder(list.first().map(|&(_, e)| e).unwrap_or("png")),
+            });
         }
         let bg_dir = dir.join("background");
         let has_backgrounds = bg_dir.is_dir()
@@ -251,7 +399,7 @@ impl Sequence {
             dir: dir.to_path_buf(),
             cameras,
             frames: all.into_iter().collect(),
-            frame_ext,
+            sources,
             has_masks,
             has_frames,
             has_backgrounds,
@@ -262,10 +410,29 @@ impl Sequence {
         Ok(seq)
     }
 
-    /// Opens the sequence `data_dir/<name>` with the calibration file `calib_path`.
+    /// Opens the sequence `dir` with the calibration file `calib_path` (a capture of
+    /// image folders; camera videos need [`Sequence::open_with_videos`]).
     pub fn open_with_calibration(calib_path: &Path, dir: &Path) -> Result<Sequence> {
+        Self::open_calibrated(calib_path, dir, None)
+    }
+
+    /// Opens the sequence `dir` with the calibration file `calib_path`, decoding camera
+    /// videos as `videos` says ([`crate::video`]).
+    pub fn open_with_videos(
+        calib_path: &Path,
+        dir: &Path,
+        videos: &VideoOptions,
+    ) -> Result<Sequence> {
+        Self::open_calibrated(calib_path, dir, Some(videos))
+    }
+
+    fn open_calibrated(
+        calib_path: &Path,
+        dir: &Path,
+        videos: Option<&VideoOptions>,
+    ) -> Result<Sequence> {
         let calib = crate::camera::read_cameras(calib_path)?;
-        let mut seq = Sequence::open(dir, calib.cameras, calib_path)?;
+        let mut seq = Sequence::open(dir, calib.cameras, calib_path, videos)?;
         seq.warnings.splice(0..0, calib.warnings);
         Ok(seq)
     }
@@ -326,12 +493,24 @@ impl Sequence {
         }
     }
 
-    /// Path of camera `cam`'s frame `frame`.
+    /// Path of camera `cam`'s frame `frame` (for a video, its decoded PNG in the cache).
     pub fn frame_path(&self, cam: usize, frame: u32) -> PathBuf {
-        self.dir
-            .join("frames")
-            .join(&self.cameras[cam].name)
-            .join(format!("{}.{}", frame_stem(frame), self.frame_ext[cam]))
+        match &self.sources[cam] {
+            FrameSource::Folder(ext) => self
+                .dir
+                .join("frames")
+                .join(&self.cameras[cam].name)
+                .join(format!("{}.{ext}", frame_stem(frame))),
+            FrameSource::Video { decoded, offset } => {
+                let index = u32::try_from(frame as i64 + offset).unwrap_or(u32::MAX);
+                decoded.dir.join(format!("{}.png", frame_stem(index)))
+            }
+        }
+    }
+
+    /// Where each camera's frames come from, in the order of the calibration.
+    pub fn sources(&self) -> &[FrameSource] {
+        &self.sources
     }
 
     /// Path of camera `cam`'s given mask of frame `frame`.

@@ -35,6 +35,7 @@ pub mod skeleton;
 pub mod slurm;
 pub mod stages;
 pub mod synth;
+pub mod video;
 pub mod yaml;
 
 pub use error::{Error, Result};

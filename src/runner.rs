@@ -70,7 +70,12 @@ impl Job {
 
     /// Loads pipeline.yaml's capture and selects frames (`frames` overrides the file's).
     pub fn load(config: Config, frames: Option<FrameRange>) -> Result<Job> {
-        let sequence = Sequence::open_with_calibration(&config.calibration, &config.sequence)?;
+        let videos = crate::dataset::VideoOptions {
+            decoded_root: config.cache.join("decoded"),
+            offsets: config.sync.offsets.clone(),
+            config_path: config.path.clone(),
+        };
+        let sequence = Sequence::open_with_videos(&config.calibration, &config.sequence, &videos)?;
         let range = frames.or(config.frames);
         let frames = match range {
             None => sequence.frames.clone(),
