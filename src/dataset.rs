@@ -263,12 +263,15 @@ impl Sequence {
                 ));
             };
             use rayon::prelude::*;
+            let progress = crate::video::progress();
             let done: Vec<Result<(usize, crate::video::Decoded)>> = video_cams
                 .par_iter()
                 .map(|(i, path)| {
-                    crate::video::decoded(path, &cameras[*i], &v.decoded_root).map(|d| (*i, d))
+                    crate::video::decoded(path, &cameras[*i], &v.decoded_root, &progress)
+                        .map(|d| (*i, d))
                 })
                 .collect();
+            progress.finish_and_clear();
             for r in done {
                 let (i, d) = r?;
                 let offset = v.offsets.get(&cameras[i].name).copied().unwrap_or(0);
@@ -339,7 +342,7 @@ impl Sequence {
                     return Err(Error::invalid(
                         &d.video,
                         format!(
-                            "camera '{}''s video holds {} frames (capture frames {}, with \
+                            "camera '{}': the video holds {} frames (capture frames {}, with \
                              offset {offset}) but other cameras have frames {}: frame \
                              {missing} is missing. A camera that started late or stopped \
                              early needs sync.offsets in pipeline.yaml, or trim the other \
@@ -506,6 +509,61 @@ impl Sequence {
                 decoded.dir.join(format!("{}.png", frame_stem(index)))
             }
         }
+    }
+
+    /// One line per camera recorded as a video: its file, frames, size against the
+    /// calibration, rate, offset, and whether it was decoded now or found decoded.
+    pub fn video_report(&self) -> Vec<String> {
+        self.sources
+            .iter()
+            .zip(&self.cameras)
+            .filter_map(|(s, cam)| match s {
+                FrameSource::Folder(_) => None,
+                FrameSource::Video { decoded, offset } => Some(format!(
+                    "{}: {} holds {} frames, {}x{} (calibrated {}x{}), {}, offset {offset}; \
+                     {} {}",
+                    cam.name,
+                    decoded.video.display(),
+                    decoded.info.frames,
+                    decoded.info.width,
+                    decoded.info.height,
+                    cam.width,
+                    cam.height,
+                    decoded
+                        .info
+                        .rate
+                        .map_or("rate not stated".to_string(), |r| format!("{r:.3} fps")),
+                    if decoded.fresh {
+                        "decoded into"
+                    } else {
+                        "decoded frames reused from"
+                    },
+                    decoded.dir.display()
+                )),
+            })
+            .collect()
+    }
+
+    /// The cameras whose video ends before capture frame `last`, each with the video and
+    /// its last capture frame (for a frame range past the end).
+    pub fn videos_ending_before(&self, last: u32) -> Vec<String> {
+        self.sources
+            .iter()
+            .zip(&self.cameras)
+            .filter_map(|(s, cam)| match s {
+                FrameSource::Video { decoded, offset } => {
+                    let end = decoded.info.frames as i64 - 1 - offset;
+                    (end < last as i64).then(|| {
+                        format!(
+                            "camera '{}': {} ends at capture frame {end}",
+                            cam.name,
+                            decoded.video.display()
+                        )
+                    })
+                }
+                FrameSource::Folder(_) => None,
+            })
+            .collect()
     }
 
     /// Where each camera's frames come from, in the order of the calibration.

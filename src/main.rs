@@ -343,6 +343,9 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             for w in &job.sequence.warnings {
                 eprintln!("warning: {w}");
             }
+            for line in job.sequence.video_report() {
+                println!("      videos: {line}");
+            }
             let opts = RunOptions {
                 only,
                 from,
@@ -720,6 +723,9 @@ fn run(cli: Cli) -> hullpose::Result<()> {
                 skeleton.map_or("no".to_string(), |s| format!("{} bones", s.bones.len())),
                 joints.map_or("no".to_string(), |j| format!("{} rows", j.len())),
             );
+            for line in seq.video_report() {
+                println!("video {line}");
+            }
             println!("stages:");
             for line in hullpose::stages::plan_notes(&job.context())? {
                 println!("  {line}");

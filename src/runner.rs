@@ -88,11 +88,17 @@ impl Job {
                     .filter(|&f| r.contains(f))
                     .collect();
                 if selected.len() as u64 != (r.last - r.first) as u64 + 1 {
+                    let videos = sequence.videos_ending_before(r.last);
                     return Err(Error::Usage(format!(
-                        "frame range {}..{} is outside the sequence {} (frames {first}..{last})",
+                        "frame range {}..{} is outside the sequence {} (frames {first}..{last}){}",
                         r.first,
                         r.last,
-                        sequence.dir.display()
+                        sequence.dir.display(),
+                        if videos.is_empty() {
+                            String::new()
+                        } else {
+                            format!("; {}", videos.join("; "))
+                        }
                     )));
                 }
                 selected

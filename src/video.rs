@@ -167,9 +167,26 @@ fn content_hash(video: &Path) -> Result<String> {
     Ok(hasher.finalize().to_hex().to_string())
 }
 
+/// A spinner counting the frames decoded (on stderr, hidden when that is not a terminal).
+pub fn progress() -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new_spinner();
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg:>12} {pos} frames ({per_sec})")
+            .expect("valid template"),
+    );
+    bar.set_message("decoding");
+    bar
+}
+
 /// The decoded frames of `video` for camera `cam`, from the cache under `root`
-/// (`<cache>/decoded`) or decoded now. The video's frame size must be the camera's.
-pub fn decoded(video: &Path, cam: &Camera, root: &Path) -> Result<Decoded> {
+/// (`<cache>/decoded`) or decoded now (counted on `progress`). The video's frame size
+/// must be the camera's.
+pub fn decoded(
+    video: &Path,
+    cam: &Camera,
+    root: &Path,
+    progress: &indicatif::ProgressBar,
+) -> Result<Decoded> {
     let content = content_hash(video)?;
     let dir = root.join(&cam.name).join(&content);
     let info_path = dir.join("info.yaml");
@@ -200,7 +217,7 @@ pub fn decoded(video: &Path, cam: &Camera, root: &Path) -> Result<Decoded> {
     let scratch = Scratch(parent.join(format!(".decoding-{content}-{}", std::process::id())));
     let _ = std::fs::remove_dir_all(&scratch.0);
     crate::fsutil::create_dir_all(&scratch.0)?;
-    let frames = decode_into(video, width, height, &scratch.0)?;
+    let frames = decode_into(video, width, height, &scratch.0, progress)?;
     if frames == 0 {
         return Err(Error::invalid(
             video,
@@ -243,7 +260,13 @@ impl Drop for Scratch {
 
 /// Decodes every frame of `video` (`width` x `height`) into `dir` as NNNNNN.png; returns
 /// how many.
-fn decode_into(video: &Path, width: u32, height: u32, dir: &Path) -> Result<u32> {
+fn decode_into(
+    video: &Path,
+    width: u32,
+    height: u32,
+    dir: &Path,
+    progress: &indicatif::ProgressBar,
+) -> Result<u32> {
     let input = file_url(video);
     let args: Vec<&std::ffi::OsStr> = ["-nostdin", "-v", "error", "-i"]
         .iter()
@@ -289,6 +312,7 @@ fn decode_into(video: &Path, width: u32, height: u32, dir: &Path) -> Result<u32>
             return Err(e);
         }
         count += 1;
+        progress.inc(1);
     };
     let status = child.wait().map_err(|e| Error::io(video, e))?;
     let stderr = errors.join().unwrap_or_default();
