@@ -305,7 +305,7 @@ fn decode_into(
             Err(e) => break Err(e.to_string()),
         }
         let img = image::RgbImage::from_raw(width, height, buf.clone()).expect("sized buffer");
-        let path = dir.join(format!("{}.png", crate::dataset::frame_stem(count)));
+        let path = dir.join(format!("{count:06}.png"));
         if let Err(e) = write_png(&path, &img) {
             let _ = child.kill();
             let _ = child.wait();

@@ -16,6 +16,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("rng", 0),
     ("camera", 0),
     ("imageio", 0),
+    ("video", 0),
     ("geometry", 0),
     ("photo", 0),
     ("maxflow", 0),
