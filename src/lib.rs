@@ -28,6 +28,7 @@ pub mod photo;
 pub mod plot;
 pub mod poses;
 pub mod recon;
+pub mod report;
 pub mod rng;
 pub mod runner;
 pub mod shell;

@@ -123,6 +123,17 @@ enum Command {
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
     },
+    /// Write an HTML report of a run, <output>/report/index.html: the fitted model playing
+    /// its motion in a 3D view with the surfaces and the skeleton, a frame slider with the
+    /// overlays, the fit's health as plots, the parameters and the evaluation's tables.
+    /// Opens from the file system, no server or network needed
+    Report {
+        /// The pipeline.yaml (after `pipeline run`).
+        file: PathBuf,
+        /// Frames, A..B inclusive (overrides pipeline.yaml).
+        #[arg(long, value_name = "A..B", value_parser = parse_range)]
+        frames: Option<FrameRange>,
+    },
     /// Write a Slurm batch plan for a frame-sharded run: an array job running the per-frame
     /// stages on slices of the frames, and a job after it running the model, the fit and the
     /// exports from the shared cache. Prints the scripts; `--submit` submits them.
@@ -402,6 +413,19 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             println!(
                 "done: {} files from the cache in {:.1} s",
                 written.files,
+                start.elapsed().as_secs_f64()
+            );
+        }
+        Command::Report { file, frames } => {
+            let start = std::time::Instant::now();
+            let job = Job::load(Config::load(&file)?, frames)?;
+            let written = hullpose::report::write(&job)?;
+            println!(
+                "wrote {} ({} frames, surfaces of {}, {:.1} MB) in {:.1} s; open it in a browser",
+                written.path.display(),
+                written.frames,
+                written.surface_frames,
+                written.bytes as f64 / 1e6,
                 start.elapsed().as_secs_f64()
             );
         }

@@ -33,6 +33,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("runner", 1),
     ("commands", 2),
     ("export", 2),
+    ("report", 2),
     ("drawing", 2),
     ("eval", 2),
     ("bench", 2),

@@ -74,6 +74,16 @@ impl CoarseModel {
         CoarseModel { keep, triangles }
     }
 
+    /// The model vertex standing for each coarse vertex.
+    pub fn kept(&self) -> &[usize] {
+        &self.keep
+    }
+
+    /// The coarse mesh's triangles, over [`CoarseModel::kept`]'s indices.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
     /// The coarse mesh at the pose of `posed` (the full model mesh posed).
     pub fn posed(&self, posed: &TriMesh) -> TriMesh {
         TriMesh {

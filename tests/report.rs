@@ -1,0 +1,88 @@
+//! `pipeline report` on the bundled sample: the page is self-contained (no script, style or
+//! data fetched from anywhere), and in a real browser (Debian's Chromium, headless, driven
+//! by puppeteer-core through `tools/check_report.cjs`, opened from the file system) it logs
+//! no error, draws the model where its vertices project, and follows the slider to frame 4
+//! with the overlay and the pose. The browser check is skipped with a note when Chromium or
+//! puppeteer-core is missing, and required with `HULLPOSE_EXTERNAL_CHECKS=1` (as CI sets).
+
+mod common;
+
+use common::*;
+use std::path::Path;
+use std::process::Command;
+
+#[test]
+fn the_report_opens_from_disk_draws_the_model_and_follows_the_slider() {
+    let dir = process_tempdir();
+    let d = dir.path();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for folder in ["calib", "data"] {
+        copy_tree(&repo.join(folder), &d.join(folder));
+    }
+    std::fs::copy(repo.join("pipeline.yaml"), d.join("pipeline.yaml")).unwrap();
+
+    // Before a run there is nothing to show: one clear error, nothing written.
+    let (ok, _, err) = run_cli(&["report", "pipeline.yaml"], d);
+    assert!(!ok);
+    assert!(err.contains("run `pipeline run"), "{err}");
+    assert!(!d.join("output/report").exists());
+
+    let (ok, _, err) = run_cli(&["run", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    let (ok, _, err) = run_cli(&["evaluate", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    let (ok, out, err) = run_cli(&["report", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("output/report/index.html (7 frames, surfaces of 7"),
+        "{out}"
+    );
+    let page = std::fs::read_to_string(d.join("output/report/index.html")).unwrap();
+    // Self-contained: every script inline, no stylesheet or module loaded from elsewhere.
+    assert!(
+        !page.contains("<script src") && !page.contains("<link"),
+        "external resources"
+    );
+    assert!(!page.contains("type=\"module\""));
+    assert!(page.contains("Three.js Authors") && page.contains("SPDX-License-Identifier: MIT"));
+    // The evaluation's tables and the fit's health are in it.
+    assert!(page.contains("joint_error.csv") && page.contains("iou_worst"));
+
+    let node = Command::new("node")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    let puppeteer = repo.join("tools/node_modules/puppeteer-core").is_dir();
+    let required = std::env::var("HULLPOSE_EXTERNAL_CHECKS").is_ok_and(|v| v == "1");
+    if !(node && Path::new(&chromium).exists() && puppeteer) {
+        assert!(
+            !required,
+            "node, {chromium} and tools/node_modules/puppeteer-core are required \
+             (HULLPOSE_EXTERNAL_CHECKS=1): apt install chromium; npm ci --prefix tools"
+        );
+        eprintln!("browser check skipped: node, {chromium} or puppeteer-core missing");
+        return;
+    }
+    let shots = d.join("shots");
+    std::fs::create_dir_all(&shots).unwrap();
+    let out = Command::new("node")
+        .arg(repo.join("tools/check_report.cjs"))
+        .arg(d.join("output/report/index.html"))
+        .arg(&shots)
+        .env("NODE_PATH", repo.join("tools/node_modules"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{stdout}");
+    assert!(out.status.success(), "{stderr}\n{stdout}");
+    for shot in [
+        "report-frame0.png",
+        "report-frame4.png",
+        "report-frame4-surface.png",
+    ] {
+        let img = image::open(shots.join(shot)).unwrap();
+        assert!(img.width() >= 1000, "{shot}");
+    }
+}
