@@ -35,12 +35,17 @@ const puppeteer = require('puppeteer-core');
       return { frame: r.frames[r.current()], src: r.overlaySrc(), points, drawn: r.drawnShare(points),
         overlayLoaded: img.complete && img.naturalWidth > 0 };
     });
+    const overlayLoaded = () => page.waitForFunction(() => {
+      const i = document.getElementById('overlay');
+      return i.complete && i.naturalWidth > 0;
+    });
     await page.evaluate(() => window.hullposeReport.setFrame(0));
+    await overlayLoaded();
     const first = await state();
     await page.screenshot({ path: path.join(shots, 'report-frame0.png') });
     // The slider, as a user moves it.
     await page.$eval('#slider', (s) => { s.value = '4'; s.dispatchEvent(new Event('input')); });
-    await page.waitForFunction(() => { const i = document.getElementById('overlay'); return i.complete && i.naturalWidth > 0; });
+    await overlayLoaded();
     const fourth = await state();
     await page.screenshot({ path: path.join(shots, 'report-frame4.png') });
     await page.$eval('#show-graphcut', (c) => { c.checked = true; c.dispatchEvent(new Event('change')); });
