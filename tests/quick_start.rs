@@ -5,17 +5,12 @@
 mod common;
 
 use common::*;
-use std::path::Path;
 
 #[test]
 fn quick_start_tracks_the_bundled_sample_within_a_centimetre() {
     let dir = process_tempdir();
     let d = dir.path();
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for folder in ["calib", "data"] {
-        copy_tree(&repo.join(folder), &d.join(folder));
-    }
-    std::fs::copy(repo.join("pipeline.yaml"), d.join("pipeline.yaml")).unwrap();
+    copy_sample(d);
     let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], d);
     assert!(ok, "{err}");
     eprintln!("{out}");

@@ -16,10 +16,7 @@ fn the_report_opens_from_disk_draws_the_model_and_follows_the_slider() {
     let dir = process_tempdir();
     let d = dir.path();
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for folder in ["calib", "data"] {
-        copy_tree(&repo.join(folder), &d.join(folder));
-    }
-    std::fs::copy(repo.join("pipeline.yaml"), d.join("pipeline.yaml")).unwrap();
+    copy_sample(d);
 
     // Before a run there is nothing to show: one clear error, nothing written.
     let (ok, _, err) = run_cli(&["report", "pipeline.yaml"], d);

@@ -30,11 +30,7 @@ fn have_ffmpeg() -> bool {
 /// A copy of the bundled sample (7 frames, 15 cameras at 256x192) in a fresh folder.
 fn sample() -> tempfile::TempDir {
     let dir = process_tempdir();
-    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for folder in ["calib", "data"] {
-        copy_tree(&repo.join(folder), &dir.path().join(folder));
-    }
-    std::fs::copy(repo.join("pipeline.yaml"), dir.path().join("pipeline.yaml")).unwrap();
+    copy_sample(dir.path());
     dir
 }
 

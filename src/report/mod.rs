@@ -164,20 +164,18 @@ pub fn write(job: &Job) -> Result<Written> {
         }
     }
     let params = crate::fsutil::read_to_string(&job.config.path)?;
-    let flagged = health_rows
-        .iter()
-        .filter(|r| {
-            r.get("flags")
-                .is_some_and(|f| f.as_str().is_some_and(|s| !s.is_empty()))
-        })
-        .count();
-    let recovered = health_rows
-        .iter()
-        .filter(|r| {
-            r.get("recovery")
-                .is_some_and(|f| f.as_str().is_some_and(|s| !s.is_empty()))
-        })
-        .count();
+    // Frames whose fit.csv row names something in `column`.
+    let marked = |column: &str| {
+        health_rows
+            .iter()
+            .filter(|r| {
+                r.get(column)
+                    .and_then(Value::as_str)
+                    .is_some_and(|s| !s.is_empty())
+            })
+            .count()
+    };
+    let (flagged, recovered) = (marked("flags"), marked("recovery"));
     let data = json!({
         "sequence": job.sequence.name(),
         "frames": frames,
