@@ -254,6 +254,18 @@ impl Sequence {
         } else {
             Vec::new()
         };
+        if has_frames {
+            for cam in cameras.iter().filter(|c| frames_dir.join(&c.name).is_dir()) {
+                if let Some(v) = crate::video::find(&frames_dir, &cam.name) {
+                    warnings.push(format!(
+                        "{}: ignored, camera '{}' has a frame folder {}",
+                        v.display(),
+                        cam.name,
+                        frames_dir.join(&cam.name).display()
+                    ));
+                }
+            }
+        }
         if !video_cams.is_empty() {
             let Some(v) = videos else {
                 return Err(Error::invalid(

@@ -213,8 +213,14 @@ pub fn decoded(
     crate::limits::check_image(video, width, height)?;
     let parent = root.join(&cam.name);
     crate::fsutil::create_dir_all(&parent)?;
-    // A scratch folder of this process, removed whatever happens unless renamed into place.
-    let scratch = Scratch(parent.join(format!(".decoding-{content}-{}", std::process::id())));
+    remove_dead_scratch(&parent);
+    // A scratch folder of this process, removed whatever happens unless renamed into place
+    // (named as the cache's temporary files: `.<name>.tmp-<host>-<pid>-<n>`).
+    let scratch = Scratch(parent.join(format!(
+        ".decoding-{content}.tmp-{}-{}-0",
+        crate::fsutil::host_name(),
+        std::process::id()
+    )));
     let _ = std::fs::remove_dir_all(&scratch.0);
     crate::fsutil::create_dir_all(&scratch.0)?;
     let frames = decode_into(video, width, height, &scratch.0, progress)?;
@@ -247,6 +253,23 @@ pub fn decoded(
         info,
         fresh: true,
     })
+}
+
+/// Removes the scratch folders that decodings killed on this host left in `dir` (their
+/// process is gone).
+fn remove_dead_scratch(dir: &Path) {
+    let host = crate::fsutil::host_name();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if !name.starts_with(".decoding-") || !e.file_type().is_ok_and(|t| t.is_dir()) {
+            continue;
+        }
+        if let Some((writer, pid)) = crate::fsutil::temp_writer(&name) {
+            if writer == host && !Path::new(&format!("/proc/{pid}")).exists() {
+                let _ = std::fs::remove_dir_all(e.path());
+            }
+        }
+    }
 }
 
 /// A folder removed when dropped (a no-op once it was renamed away).

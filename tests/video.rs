@@ -288,6 +288,22 @@ fn short_resized_and_damaged_videos_and_a_missing_ffmpeg_are_refused_by_name() {
         "{err}"
     );
 
+    // A camera with both a folder and a video: the folder is read, the video named as
+    // ignored.
+    let both = variant(&|frames| {
+        let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+        copy_tree(
+            &repo.join("data/tripod/frames/cam00"),
+            &frames.join("cam00"),
+        );
+    });
+    let (ok, _, err) = run_cli(&["check", "pipeline.yaml"], both.path());
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("cam00.mkv: ignored, camera 'cam00' has a frame folder"),
+        "{err}"
+    );
+
     // A sync offset for a camera that does not exist.
     let yaml = base.path().join("pipeline.yaml");
     let text = std::fs::read_to_string(&yaml).unwrap();
