@@ -2,8 +2,10 @@
 //! data fetched from anywhere), and in a real browser (Debian's Chromium, headless, driven
 //! by puppeteer-core through `tools/check_report.cjs`, opened from the file system) it logs
 //! no error, draws the model where its vertices project, and follows the slider to frame 4
-//! with the overlay and the pose. The browser check is skipped with a note when Chromium or
-//! puppeteer-core is missing, and required with `HULLPOSE_EXTERNAL_CHECKS=1` (as CI sets).
+//! with the overlay and the pose; in Firefox ESR (headless here without WebGL) the page says
+//! the 3D view is unavailable and the rest works. The browser checks are skipped with a note
+//! when a browser or puppeteer-core is missing, and required with `HULLPOSE_EXTERNAL_CHECKS=1`
+//! (as CI sets).
 
 mod common;
 
@@ -63,17 +65,26 @@ fn the_report_opens_from_disk_draws_the_model_and_follows_the_slider() {
     }
     let shots = d.join("shots");
     std::fs::create_dir_all(&shots).unwrap();
-    let out = Command::new("node")
-        .arg(repo.join("tools/check_report.cjs"))
-        .arg(d.join("output/report/index.html"))
-        .arg(&shots)
-        .env("NODE_PATH", repo.join("tools/node_modules"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    eprintln!("{stdout}");
-    assert!(out.status.success(), "{stderr}\n{stdout}");
+    let check = |browser: &str| {
+        let out = Command::new("node")
+            .arg(repo.join("tools/check_report.cjs"))
+            .arg(d.join("output/report/index.html"))
+            .arg(&shots)
+            .env("NODE_PATH", repo.join("tools/node_modules"))
+            .env("BROWSER", browser)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        eprintln!("{stdout}");
+        assert!(out.status.success(), "{browser}: {stderr}\n{stdout}");
+        stdout
+    };
+    let chromium_figures = check("chromium");
+    assert!(
+        chromium_figures.contains("\"webgl\":true"),
+        "{chromium_figures}"
+    );
     for shot in [
         "report-frame0.png",
         "report-frame4.png",
@@ -81,5 +92,16 @@ fn the_report_opens_from_disk_draws_the_model_and_follows_the_slider() {
     ] {
         let img = image::open(shots.join(shot)).unwrap();
         assert!(img.width() >= 1000, "{shot}");
+    }
+    // Firefox ESR when installed: the page works there too (with or without WebGL).
+    let firefox = std::env::var("FIREFOX").unwrap_or_else(|_| "/usr/bin/firefox-esr".into());
+    if Path::new(&firefox).exists() {
+        check("firefox");
+    } else {
+        assert!(
+            !required,
+            "{firefox} is required (HULLPOSE_EXTERNAL_CHECKS=1): apt install firefox-esr"
+        );
+        eprintln!("Firefox check skipped: {firefox} missing");
     }
 }

@@ -14,10 +14,23 @@
 
   // ---- 3D view ----
   const container = el('view3d');
-  const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-  renderer.setPixelRatio(window.devicePixelRatio || 1);
-  renderer.setClearColor(CLEAR);
-  container.appendChild(renderer.domElement);
+  // A browser without WebGL (software rendering off, no GL driver) keeps everything but the
+  // 3D view.
+  let renderer = null;
+  try {
+    renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    renderer.setPixelRatio(window.devicePixelRatio || 1);
+    renderer.setClearColor(CLEAR);
+    container.appendChild(renderer.domElement);
+  } catch (e) {
+    renderer = null;
+    const note = document.createElement('p');
+    note.id = 'no-webgl';
+    note.textContent = 'The 3D view needs WebGL, which this browser has turned off or cannot create (' + e.message + '). The slider, pictures and plots work without it.';
+    note.style.color = '#eee';
+    note.style.padding = '1rem';
+    container.appendChild(note);
+  }
   const scene = new THREE.Scene();
   scene.add(new THREE.HemisphereLight(0xffffff, 0x404040, 2.0));
   const sun = new THREE.DirectionalLight(0xffffff, 1.5);
@@ -135,12 +148,14 @@
   }, { passive: false });
 
   function resize() {
+    if (!renderer) return;
     const w = container.clientWidth || 640, h = container.clientHeight || 480;
     renderer.setSize(w, h);
     camera.aspect = w / h;
     camera.updateProjectionMatrix();
   }
   function render() {
+    if (!renderer) return;
     placeCamera();
     renderer.render(scene, camera);
   }
@@ -300,6 +315,7 @@
 
   // For tests and scripts: drive the page and read what it drew.
   window.hullposeReport = {
+    webgl: renderer !== null,
     frames: frames,
     setFrame: setFrame,
     current: () => current,
@@ -307,6 +323,7 @@
     // The model's vertices projected into the canvas, CSS pixels (every k-th).
     modelScreenPoints: (k) => {
       const out = [];
+      if (!renderer) return out;
       const v = new THREE.Vector3();
       const rect = renderer.domElement.getBoundingClientRect();
       for (let i = 0; i < nv; i += k || 1) {
@@ -317,6 +334,7 @@
     },
     // The share of `points` (CSS pixels) whose pixel differs from the background.
     drawnShare: (points) => {
+      if (!renderer) return 0;
       const c = renderer.domElement;
       const scratch = document.createElement('canvas');
       scratch.width = c.width; scratch.height = c.height;
