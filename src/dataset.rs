@@ -219,17 +219,8 @@ impl Sequence {
             let path = entry.path();
             if path.is_dir() {
                 folders.insert(entry.file_name().to_string_lossy().into_owned());
-            } else if has_frames {
-                if let Some(stem) = path
-                    .extension()
-                    .and_then(|e| e.to_str())
-                    .filter(|e| {
-                        crate::video::VIDEO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str())
-                    })
-                    .and(path.file_stem())
-                {
-                    folders.insert(stem.to_string_lossy().into_owned());
-                }
+            } else if let Some(camera) = crate::video::camera_of(&path).filter(|_| has_frames) {
+                folders.insert(camera);
             }
         }
         for name in &folders {
@@ -243,27 +234,23 @@ impl Sequence {
         }
         let mut per_camera = Vec::with_capacity(cameras.len());
         let mut decoded: Vec<Option<(crate::video::Decoded, i64)>> = vec![None; cameras.len()];
-        // Cameras recorded as videos, decoded (or found decoded) in parallel.
-        let video_cams: Vec<(usize, PathBuf)> = if has_frames {
-            cameras
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| !frames_dir.join(&c.name).is_dir())
-                .filter_map(|(i, c)| crate::video::find(&frames_dir, &c.name).map(|v| (i, v)))
-                .collect()
-        } else {
-            Vec::new()
-        };
-        if has_frames {
-            for cam in cameras.iter().filter(|c| frames_dir.join(&c.name).is_dir()) {
-                if let Some(v) = crate::video::find(&frames_dir, &cam.name) {
-                    warnings.push(format!(
-                        "{}: ignored, camera '{}' has a frame folder {}",
-                        v.display(),
-                        cam.name,
-                        frames_dir.join(&cam.name).display()
-                    ));
-                }
+        // Cameras recorded as videos (a camera's frame folder wins over its video), decoded
+        // (or found decoded) in parallel below.
+        let mut video_cams: Vec<(usize, PathBuf)> = Vec::new();
+        for (i, cam) in cameras.iter().enumerate().filter(|_| has_frames) {
+            let Some(video) = crate::video::find(&frames_dir, &cam.name) else {
+                continue;
+            };
+            let folder = frames_dir.join(&cam.name);
+            if folder.is_dir() {
+                warnings.push(format!(
+                    "{}: ignored, camera '{}' has a frame folder {}",
+                    video.display(),
+                    cam.name,
+                    folder.display()
+                ));
+            } else {
+                video_cams.push((i, video));
             }
         }
         if !video_cams.is_empty() {
@@ -576,11 +563,6 @@ impl Sequence {
                 FrameSource::Folder(_) => None,
             })
             .collect()
-    }
-
-    /// Where each camera's frames come from, in the order of the calibration.
-    pub fn sources(&self) -> &[FrameSource] {
-        &self.sources
     }
 
     /// Path of camera `cam`'s given mask of frame `frame`.

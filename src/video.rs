@@ -51,19 +51,24 @@ pub struct Decoded {
     pub fresh: bool,
 }
 
-/// The video of `camera` in `frames_dir`, if there is one (`<camera>.<ext>`, a regular
-/// file; the extension in any case).
+/// The camera a video file stands for: its file stem, when its extension is a video's
+/// ([`VIDEO_EXTENSIONS`], in any case).
+pub fn camera_of(path: &Path) -> Option<String> {
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    VIDEO_EXTENSIONS
+        .contains(&ext.as_str())
+        .then(|| path.file_stem()?.to_str().map(str::to_string))
+        .flatten()
+}
+
+/// The video of `camera` in `frames_dir`, if there is one (`<camera>.<ext>`; the first by
+/// name when there are several).
 pub fn find(frames_dir: &Path, camera: &str) -> Option<PathBuf> {
     let entries = std::fs::read_dir(frames_dir).ok()?;
     let mut found: Vec<PathBuf> = entries
         .flatten()
         .map(|e| e.path())
-        .filter(|p| {
-            p.file_stem().and_then(|s| s.to_str()) == Some(camera)
-                && p.extension()
-                    .and_then(|e| e.to_str())
-                    .is_some_and(|e| VIDEO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        })
+        .filter(|p| camera_of(p).as_deref() == Some(camera))
         .collect();
     found.sort();
     found.into_iter().next()

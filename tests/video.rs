@@ -217,24 +217,23 @@ fn short_resized_and_damaged_videos_and_a_missing_ffmpeg_are_refused_by_name() {
         dir
     };
 
+    // `cam`'s video replaced by ffmpeg's output of it with `options`.
+    let transcoded = |cam: &str, options: &[&str]| {
+        let cam = cam.to_string();
+        let options: Vec<String> = options.iter().map(|o| o.to_string()).collect();
+        variant(&move |frames| {
+            let v = frames.join(format!("{cam}.mkv"));
+            let out = frames.join("transcoded.mkv");
+            let mut args = vec!["-i", v.to_str().unwrap()];
+            args.extend(options.iter().map(String::as_str));
+            args.push(out.to_str().unwrap());
+            ffmpeg(frames, &args);
+            std::fs::rename(&out, &v).unwrap();
+        })
+    };
+
     // One frame short, without an offset that explains it.
-    let short = variant(&|frames| {
-        let v = frames.join("cam03.mkv");
-        let cut = frames.join("cut.mkv");
-        ffmpeg(
-            frames,
-            &[
-                "-i",
-                v.to_str().unwrap(),
-                "-frames:v",
-                "6",
-                "-c",
-                "copy",
-                cut.to_str().unwrap(),
-            ],
-        );
-        std::fs::rename(&cut, &v).unwrap();
-    });
+    let short = transcoded("cam03", &["-frames:v", "6", "-c", "copy"]);
     let err = refused(short.path(), "none");
     assert!(
         err.contains("cam03.mkv") && err.contains("holds 6 frames") && err.contains("sync.offsets"),
@@ -242,23 +241,7 @@ fn short_resized_and_damaged_videos_and_a_missing_ffmpeg_are_refused_by_name() {
     );
 
     // Another camera's size.
-    let resized = variant(&|frames| {
-        let v = frames.join("cam05.mkv");
-        let small = frames.join("small.mkv");
-        ffmpeg(
-            frames,
-            &[
-                "-i",
-                v.to_str().unwrap(),
-                "-vf",
-                "scale=320:240",
-                "-c:v",
-                "ffv1",
-                small.to_str().unwrap(),
-            ],
-        );
-        std::fs::rename(&small, &v).unwrap();
-    });
+    let resized = transcoded("cam05", &["-vf", "scale=320:240", "-c:v", "ffv1"]);
     let err = refused(resized.path(), "cam05");
     assert!(
         err.contains("cam05.mkv") && err.contains("320x240") && err.contains("256x192"),
