@@ -202,6 +202,8 @@ impl Config {
             export: file.export,
             sync: file.sync,
         };
+        crate::recon::silhouette::validate(&config.silhouette)
+            .map_err(|m| Error::invalid(path, m))?;
         graphcut::validate(&config.graphcut).map_err(|m| Error::invalid(path, m))?;
         reliability::validate(&config.reliability).map_err(|m| Error::invalid(path, m))?;
         model::validate(&config.model).map_err(|m| Error::invalid(path, m))?;

@@ -36,6 +36,10 @@ pub struct Sequence {
     pub warnings: Vec<String>,
     /// Read as if it had no skeleton.yaml (`pipeline skeleton --force` replacing one).
     pub skeleton_ignored: bool,
+    /// The key of the background plates learned from the frames
+    /// ([`crate::artifacts::learned_background`]), once learned (`silhouette.method:
+    /// learned`).
+    pub learned_plates: Option<String>,
 }
 
 /// Where a camera's frames come from.
@@ -407,6 +411,7 @@ impl Sequence {
             has_backgrounds,
             warnings,
             skeleton_ignored: false,
+            learned_plates: None,
         };
         seq.check_image_sizes()?;
         Ok(seq)

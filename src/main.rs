@@ -39,7 +39,7 @@ enum Command {
         #[arg(long, default_value_t = 768)]
         height: u32,
         /// Number of frames sampled over the motion (default: its key frames, 19 for the
-        /// tripod, 24 for the humanoid, 39 for its dance).
+        /// tripod, 24 for the humanoid and its walk, 39 for its dance).
         #[arg(long)]
         frames: Option<usize>,
         /// Random seed (camera jitter, pixel noise); the same seed gives the same bytes.
@@ -48,8 +48,10 @@ enum Command {
         /// Grid spacing of the subject's true surface, metres (smaller: finer true meshes).
         #[arg(long, default_value_t = 0.01)]
         mesh_spacing: f64,
-        /// The humanoid's motion: `default`, or `dance` (fast arms crossing, a leg crossing
-        /// step and a 120-degree turn at 25 frames per second, 39 frames).
+        /// The humanoid's motion: `default`, `dance` (fast arms crossing, a leg crossing
+        /// step and a 120-degree turn at 25 frames per second, 39 frames), `arms-down` (ten
+        /// frames with the arms at the sides first) or `walk` (once around a 1 m circle,
+        /// through every camera's view: for `silhouette.method: learned`).
         #[arg(long, value_enum, default_value = "default")]
         motion: hullpose::synth::Motion,
         /// The humanoid's body: 0 the standard 1.8 m body, any other number a body drawn
@@ -356,6 +358,9 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             }
             for line in job.sequence.video_report() {
                 println!("      videos: {line}");
+            }
+            if let Some(line) = &job.learning {
+                println!("  silhouette: {line}");
             }
             let opts = RunOptions {
                 only,
@@ -749,6 +754,9 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             );
             for line in seq.video_report() {
                 println!("video {line}");
+            }
+            if let Some(line) = &job.learning {
+                println!("{line}");
             }
             println!("stages:");
             for line in hullpose::stages::plan_notes(&job.context())? {

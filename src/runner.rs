@@ -54,6 +54,8 @@ pub struct Job {
     pub sequence: Sequence,
     pub frames: Vec<u32>,
     pub cache: Cache,
+    /// Method `learned`: what learning the plates did (one line for the summary).
+    pub learning: Option<String>,
 }
 
 impl Job {
@@ -65,6 +67,7 @@ impl Job {
             sequence: self.sequence.clone(),
             frames,
             cache: self.cache.clone(),
+            learning: self.learning.clone(),
         }
     }
 
@@ -105,11 +108,19 @@ impl Job {
             }
         };
         let cache = Cache::new(&config.cache);
+        let mut sequence = sequence;
+        // The learned plates come from pipeline.yaml's frames, whatever this job computes,
+        // so that a shard or a single frame sees the plates a whole run sees.
+        let learning = crate::stages::silhouette::learn_plates(&config, &sequence, &cache)?;
+        sequence.learned_plates = learning.as_ref().map(|l| l.key.clone());
         Ok(Job {
             config,
             sequence,
             frames,
             cache,
+            learning: learning
+                .as_ref()
+                .map(crate::stages::silhouette::learning_report),
         })
     }
 

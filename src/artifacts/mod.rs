@@ -5,6 +5,7 @@
 //! | artifact | stage folder | files per frame |
 //! |---|---|---|
 //! | [`silhouettes`] | `silhouette` | `NNNNNN/<camera>.png` |
+//! | [`learned_background`] (method `learned`) | `learned_background/<key>` | per capture: `<camera>.png`, `<camera>.share.png`, `learned.yaml` |
 //! | [`reconstruction`] (hull) | `visual_hull` | `NNNNNN.ply`, `NNNNNN.grid`, `NNNNNN.band` |
 //! | [`reconstruction`] (refined) | `graphcut` | `NNNNNN.ply`, `NNNNNN.grid` |
 //! | [`observation`] | `reliability` | `NNNNNN.ply`, `NNNNNN.obs` |
@@ -16,6 +17,7 @@ use std::path::Path;
 
 pub mod body_model;
 pub mod fitted;
+pub mod learned_background;
 pub mod observation;
 pub mod reconstruction;
 pub mod silhouettes;

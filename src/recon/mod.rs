@@ -4,6 +4,7 @@
 //! [`crate::stages`] feed them and store what they return.
 
 pub mod graphcut;
+pub mod learned_background;
 pub mod reliability;
 pub mod silhouette;
 pub mod visual_hull;

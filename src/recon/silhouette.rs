@@ -27,6 +27,9 @@ pub enum SilhouetteMethod {
     /// Subtraction of one constant background colour (`background_color`), for captures on
     /// a uniform backdrop without plates (e.g. objects on black).
     Constant,
+    /// Subtraction of a plate learned from the frames themselves, for captures without
+    /// plates where the subject moves through the view ([`super::learned_background`]).
+    Learned,
 }
 
 /// Parameters of the silhouette stage (pipeline.yaml key `silhouette`).
@@ -60,6 +63,16 @@ pub struct SilhouetteParams {
     /// filled, small components dropped): for real masks with specks, floor blobs or a
     /// cable line. Default false: given masks are used as they are.
     pub clean_given: bool,
+    /// Method `learned`: frames whose colours lie within this distance of each other show
+    /// the same thing (Euclidean RGB distance, 8-bit levels). Default 20.
+    pub learned_tolerance: f64,
+    /// Method `learned`: a pixel whose steadiest colour fills fewer than this share of the
+    /// frames never showed its background; it counts as the subject's in every frame.
+    /// Default 0.2.
+    pub learned_min_share: f64,
+    /// Method `learned`: a camera with more than this share of its pixels never showing the
+    /// background is refused (plates or masks are needed). Default 0.02.
+    pub learned_max_undecided: f64,
 }
 
 impl Default for SilhouetteParams {
@@ -76,6 +89,9 @@ impl Default for SilhouetteParams {
             background_color: [0, 0, 0],
             constant_threshold: 48.0,
             clean_given: false,
+            learned_tolerance: 20.0,
+            learned_min_share: 0.2,
+            learned_max_undecided: 0.02,
         }
     }
 }
@@ -254,6 +270,44 @@ pub fn subtract_background(
 ) -> GrayImage {
     let (w, h) = (frame.width() as usize, frame.height() as usize);
     to_image(&clean(&classify(frame, background, p), w, h, p), w, h)
+}
+
+/// Checks the method `learned` keys; the message names the key.
+pub fn validate(p: &SilhouetteParams) -> std::result::Result<(), crate::error::Refusal> {
+    if !(p.learned_tolerance.is_finite() && p.learned_tolerance > 0.0) {
+        return Err(format!(
+            "key 'silhouette.learned_tolerance': {} is not a positive RGB distance (8-bit levels; default 20)",
+            p.learned_tolerance
+        )
+        .into());
+    }
+    for (key, v) in [
+        ("learned_min_share", p.learned_min_share),
+        ("learned_max_undecided", p.learned_max_undecided),
+    ] {
+        if !(0.0..=1.0).contains(&v) {
+            return Err(
+                format!("key 'silhouette.{key}': {v} is not a share between 0 and 1").into(),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// A frame's mask against a learned plate: background subtraction, with every pixel whose
+/// background was never seen (`share` below `p.learned_min_share`) counted as the subject's.
+pub fn subtract_learned(
+    frame: &RgbImage,
+    plate: &RgbImage,
+    share: &[f32],
+    p: &SilhouetteParams,
+) -> GrayImage {
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let mut raw = classify(frame, plate, p);
+    for (r, &s) in raw.iter_mut().zip(share) {
+        *r |= (s as f64) < p.learned_min_share;
+    }
+    to_image(&clean(&raw, w, h, p), w, h)
 }
 
 #[cfg(test)]

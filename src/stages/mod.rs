@@ -122,6 +122,12 @@ impl Inputs<'_> {
         crate::artifacts::silhouettes::read(self.cache, frame, &self.sequence.cameras)
     }
 
+    /// Camera `cam`'s learned background plate and its per-pixel share, from the plates
+    /// with `key` (the silhouette stage's settings hold it, so its key covers them).
+    pub fn learned_plate(&self, key: &str, cam: usize) -> Result<(image::RgbImage, Vec<f32>)> {
+        crate::artifacts::learned_background::read(self.cache, key, &self.sequence.cameras[cam])
+    }
+
     /// A frame's reconstructed mesh.
     pub fn mesh(&self, surface: Surface, frame: u32) -> Result<TriMesh> {
         self.declared(surface.stage())?;
@@ -448,6 +454,9 @@ pub fn plan_notes(ctx: &Context) -> Result<Vec<String>> {
         }
         SilhouetteMethod::Masks => "the given masks (masks/)",
         SilhouetteMethod::Constant => "subtraction of one constant background colour",
+        SilhouetteMethod::Learned => {
+            "subtraction of background plates learned from the frames (no plates given)"
+        }
         _ => "background subtraction against the plates (background/)",
     };
     let photo = seq.has_frames;

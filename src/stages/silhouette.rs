@@ -2,6 +2,7 @@
 //! asked), or background subtraction against the plates or one constant colour.
 
 use super::{Inputs, PerFrame, Produced};
+use crate::artifacts::learned_background::{self, LearnedInfo};
 use crate::artifacts::silhouettes::Silhouettes;
 use crate::cache::KeyBuilder;
 use crate::config::Config;
@@ -16,6 +17,9 @@ pub struct Settings {
     /// The method `auto` resolved for this capture.
     pub method: SilhouetteMethod,
     pub params: SilhouetteParams,
+    /// Method `learned`: the key of the learned plates (which holds the content of every
+    /// frame they were learned from, [`learn_plates`]).
+    pub learned_plates: Option<String>,
 }
 
 /// The stage.
@@ -25,6 +29,7 @@ fn resolve(config: &Config, sequence: &Sequence) -> Result<Settings> {
     Ok(Settings {
         method: resolve_method(config, sequence)?,
         params: config.silhouette.clone(),
+        learned_plates: sequence.learned_plates.clone(),
     })
 }
 
@@ -40,7 +45,9 @@ pub fn resolve_method(config: &Config, seq: &Sequence) -> Result<SilhouetteMetho
             seq.dir.join("masks"),
             "silhouette.method is 'masks' but the sequence has no masks/ folder",
         )),
-        SilhouetteMethod::Background | SilhouetteMethod::Constant if !seq.has_frames => {
+        SilhouetteMethod::Background | SilhouetteMethod::Constant | SilhouetteMethod::Learned
+            if !seq.has_frames =>
+        {
             Err(Error::invalid(
                 seq.dir.join("frames"),
                 "a masks-only capture (no frames/) takes its silhouettes from masks/; \
@@ -63,7 +70,10 @@ pub(super) fn sources(ctx: &super::Context, frame: u32, key: &mut KeyBuilder) ->
         key.add("camera", &seq.cameras[c].name);
         match method {
             SilhouetteMethod::Masks => key.add_file(&seq.mask_path(c, frame))?,
-            SilhouetteMethod::Constant => key.add_file(&seq.frame_path(c, frame))?,
+            // The learned plates' key (in the settings) holds what they were learned from.
+            SilhouetteMethod::Constant | SilhouetteMethod::Learned => {
+                key.add_file(&seq.frame_path(c, frame))?
+            }
             _ => key
                 .add_file(&seq.frame_path(c, frame))?
                 .add_file(&seq.background_path(c))?,
@@ -91,6 +101,17 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
             SilhouetteMethod::Constant => {
                 silhouette::subtract_constant(&seq.load_frame(c, frame)?, p)
             }
+            SilhouetteMethod::Learned => {
+                let key = s.learned_plates.as_deref().ok_or_else(|| {
+                    Error::Usage(
+                        "silhouette.method is 'learned' but the plates were not learned \
+                         (a defect of hullpose, please report it)"
+                            .into(),
+                    )
+                })?;
+                let (plate, share) = inputs.learned_plate(key, c)?;
+                silhouette::subtract_learned(&seq.load_frame(c, frame)?, &plate, &share, p)
+            }
             _ => {
                 let img = seq.load_frame(c, frame)?;
                 let bg = seq.load_background(c)?.ok_or_else(|| {
@@ -103,4 +124,140 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
     }
     let cameras = seq.cameras.iter().map(|c| c.name.clone()).collect();
     Ok(Produced::new(Silhouettes { cameras, masks }, Vec::new()))
+}
+
+/// The most frames a plate is learned from (evenly spread over the selected range): enough
+/// for the mode of a pixel's colours, and a bound on the memory the learning takes.
+pub const MAX_LEARNING_FRAMES: usize = 60;
+
+/// What [`learn_plates`] did.
+pub struct Learning {
+    /// The plates' key (for [`Sequence::learned_plates`]).
+    pub key: String,
+    pub info: LearnedInfo,
+    /// Whether they were learned now (false: found in the cache).
+    pub computed: bool,
+}
+
+/// Method `learned`: learns every camera's plate from the frames pipeline.yaml selects
+/// (`frames`, at most [`MAX_LEARNING_FRAMES`] of them, evenly spread), or finds them in the
+/// cache. `None` for the other methods. A camera with more than
+/// `silhouette.learned_max_undecided` of its pixels never showing a steady background is
+/// refused by name: it needs plates or masks.
+pub fn learn_plates(
+    config: &Config,
+    seq: &Sequence,
+    cache: &crate::cache::Cache,
+) -> Result<Option<Learning>> {
+    if resolve_method(config, seq)? != SilhouetteMethod::Learned {
+        return Ok(None);
+    }
+    let p = &config.silhouette;
+    let selected: Vec<u32> = seq
+        .frames
+        .iter()
+        .copied()
+        .filter(|&f| config.frames.is_none_or(|r| r.contains(f)))
+        .collect();
+    let frames: Vec<u32> = if selected.len() <= MAX_LEARNING_FRAMES {
+        selected
+    } else {
+        (0..MAX_LEARNING_FRAMES)
+            .map(|k| selected[k * (selected.len() - 1) / (MAX_LEARNING_FRAMES - 1)])
+            .collect()
+    };
+    let files: Vec<Vec<std::path::PathBuf>> = (0..seq.cameras.len())
+        .map(|c| frames.iter().map(|&f| seq.frame_path(c, f)).collect())
+        .collect();
+    let key = learned_background::key(p, &seq.cameras, &files)?;
+    if let Some(info) = learned_background::existing(cache, &key) {
+        refuse_undecided(config, &info)?;
+        return Ok(Some(Learning {
+            key,
+            info,
+            computed: false,
+        }));
+    }
+    // On stderr, hidden when that is not a terminal.
+    let bar = indicatif::ProgressBar::new(seq.cameras.len() as u64);
+    bar.set_message("background");
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} cameras")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    let mut plates = Vec::with_capacity(seq.cameras.len());
+    let mut undecided = Vec::with_capacity(seq.cameras.len());
+    for c in 0..seq.cameras.len() {
+        // One camera's frames at a time: 60 frames of 1920x1080 are 370 MB.
+        let images: Vec<image::RgbImage> = frames
+            .iter()
+            .map(|&f| seq.load_frame(c, f))
+            .collect::<Result<_>>()?;
+        let refs: Vec<&image::RgbImage> = images.iter().collect();
+        let learned = crate::recon::learned_background::learn(&refs, p.learned_tolerance);
+        undecided.push((
+            seq.cameras[c].name.clone(),
+            learned.never_background(p.learned_min_share),
+        ));
+        plates.push(learned);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let info = LearnedInfo { frames, undecided };
+    // Refused before anything is written: a rerun refuses again, by name.
+    refuse_undecided(config, &info)?;
+    learned_background::write(cache, &key, &seq.cameras, &plates, &info)?;
+    Ok(Some(Learning {
+        key,
+        info,
+        computed: true,
+    }))
+}
+
+fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
+    let p = &config.silhouette;
+    let bad: Vec<String> = info
+        .undecided
+        .iter()
+        .filter(|(_, share)| *share > p.learned_max_undecided)
+        .map(|(cam, share)| format!("{cam} ({:.1}%)", 100.0 * share))
+        .collect();
+    if bad.is_empty() {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        &config.path,
+        format!(
+            "silhouette.method 'learned': camera(s) {} never show a steady background at more \
+             than {:.1}% of their pixels (no colour fills {:.0}% of the {} frames learned \
+             from): the subject covers them too often for the background to be learned from \
+             the frames. Give background plates (background/<camera>.png) or masks \
+             (masks/<camera>/), or select frames where the subject moves through the view",
+            bad.join(", "),
+            100.0 * p.learned_max_undecided,
+            100.0 * p.learned_min_share,
+            info.frames.len()
+        ),
+    ))
+}
+
+/// One line on the learned plates, for `pipeline check` and the run's summary.
+pub fn learning_report(learning: &Learning) -> String {
+    let undecided: Vec<String> = learning
+        .info
+        .undecided
+        .iter()
+        .map(|(cam, share)| format!("{cam} {:.1}%", 100.0 * share))
+        .collect();
+    format!(
+        "learned background: {} from {} frames; never background (counted as the subject's): {}",
+        if learning.computed {
+            "learned"
+        } else {
+            "reused"
+        },
+        learning.info.frames.len(),
+        undecided.join(", ")
+    )
 }

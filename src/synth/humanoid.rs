@@ -16,6 +16,10 @@ pub const KEY_FRAMES: usize = 24;
 
 /// Key frames of the dance (`--motion dance`), at 25 per second.
 pub const DANCE_KEY_FRAMES: usize = 39;
+/// Key frames of the walk (once around its circle).
+pub const WALK_KEY_FRAMES: usize = 24;
+/// Radius of the walk's circle, metres.
+const WALK_RADIUS: f64 = 1.0;
 
 /// How far the dance turns the body about the vertical over its key frames, degrees.
 const DANCE_TURN_DEG: f64 = 120.0;
@@ -460,6 +464,55 @@ fn leg_across(body: &Body) -> Pose {
     p.pose
 }
 
+/// Mid-stride: leg `front` (`l` or `r`) forward, the other back, the arms swinging the
+/// other way (the body faces -y).
+fn stride(body: &Body, front: &str) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    let back = if front == "l" { "r" } else { "l" };
+    p.point(&format!("thigh_{front}"), Vector3::new(0.0, -0.45, -1.0));
+    p.point(&format!("shin_{front}"), Vector3::new(0.0, -0.2, -1.0));
+    p.point(&format!("thigh_{back}"), Vector3::new(0.0, 0.35, -1.0));
+    p.point(&format!("shin_{back}"), Vector3::new(0.0, 0.6, -1.0));
+    for (s, side) in [(1.0, "l"), (-1.0, "r")] {
+        let swing = if side == front { 0.4 } else { -0.4 };
+        for part in ["upper_arm", "forearm", "hand"] {
+            p.point(
+                &format!("{part}_{side}"),
+                Vector3::new(s * 0.25, swing, -1.0),
+            );
+        }
+    }
+    p.pose
+}
+
+/// The walk's poses at `frames` evenly spaced times: once around a circle of
+/// [`WALK_RADIUS`] counter-clockwise, facing the way it goes, a step every two key frames.
+/// The circle starts at the origin in the rest A-pose (the reference frame of the
+/// skeleton, facing -y) and its centre lies at +x.
+fn walk(body: &Body, frames: usize) -> Vec<Pose> {
+    let (rest, left, right) = (a_pose(body), stride(body, "l"), stride(body, "r"));
+    scene::sample_times(WALK_KEY_FRAMES, frames)
+        .into_iter()
+        .map(|t| {
+            let angle = std::f64::consts::TAU * t / WALK_KEY_FRAMES as f64;
+            let step = 0.5 + 0.5 * (std::f64::consts::PI * t / 2.0).sin();
+            // Out of the A-pose over the first key frame.
+            let mut pose = blend(&rest, &blend(&left, &right, step), t.min(1.0));
+            // Turned by the angle walked: the tangent of the circle stays the body's front.
+            let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), angle);
+            for r in &mut pose.rotations {
+                *r = turn * *r;
+            }
+            pose.root_translation = Vector3::new(
+                WALK_RADIUS * (1.0 - angle.cos()),
+                -WALK_RADIUS * angle.sin(),
+                0.0,
+            );
+            pose
+        })
+        .collect()
+}
+
 /// Interpolates two poses (per-bone world rotations by slerp, root translation linearly).
 fn blend(a: &Pose, b: &Pose, t: f64) -> Pose {
     Pose {
@@ -541,6 +594,8 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
             KEY_FRAMES,
             0.0,
         ),
+        // Replaced by the walk's own poses below.
+        super::Motion::Walk => (vec![(0.0, &a, vec![])], WALK_KEY_FRAMES, 0.0),
         super::Motion::Default => (
             vec![
                 (0.0, &a, vec![]),
@@ -584,6 +639,9 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
         for r in &mut pose.rotations {
             *r = turn * *r;
         }
+    }
+    if motion == super::Motion::Walk {
+        poses = walk(&body, frames);
     }
     let cams = scene::camera_ring(
         &RingSpec {

@@ -99,6 +99,11 @@ pub enum Motion {
     /// against the hips (humanoid only): no frame before the tenth is an open pose. The
     /// A-pose comes at key frame 13, the reference frame of skeleton.yaml.
     ArmsDown,
+    /// Walking once around a circle of 1 m radius from the volume's centre (in the A-pose
+    /// at frame 0), facing the way it goes, legs and arms swinging (humanoid only, 24 frames):
+    /// the subject moves through every camera's view, so each pixel shows the background in
+    /// most frames (for `silhouette.method: learned`).
+    Walk,
 }
 
 /// Which scene to make.
@@ -184,7 +189,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     }
     if opts.motion != Motion::Default && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage(
-            "--motion dance and --motion arms-down need --scene humanoid".into(),
+            "--motion dance, arms-down and walk need --scene humanoid".into(),
         ));
     }
     Ok(match opts.scene {
@@ -208,6 +213,8 @@ fn key_frames(opts: &SynthOptions) -> (usize, f64) {
         (SceneKind::Humanoid, Motion::Dance) => (humanoid::DANCE_KEY_FRAMES, 25.0),
         (SceneKind::Humanoid, Motion::Default) => (humanoid::KEY_FRAMES, 8.0),
         (SceneKind::Humanoid, Motion::ArmsDown) => (humanoid::KEY_FRAMES, 8.0),
+        // 15 degrees of the circle (26 cm) a frame: a walk at 4 frames per second.
+        (SceneKind::Humanoid, Motion::Walk) => (humanoid::WALK_KEY_FRAMES, 4.0),
     }
 }
 
