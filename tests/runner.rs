@@ -15,28 +15,14 @@ struct RunDir {
 }
 
 fn run_dir(made: &Made, seq: &str, extra_yaml: &str) -> RunDir {
-    let dir = tempfile::tempdir().unwrap();
-    let src = made.root.join("data").join(seq);
-    let dst = dir.path().join("data").join(seq);
-    std::fs::create_dir_all(&dst).unwrap();
-    for entry in ["frames", "background", "skeleton.yaml"] {
-        std::os::unix::fs::symlink(src.join(entry), dst.join(entry)).unwrap();
-    }
-    std::fs::create_dir_all(dir.path().join("calib")).unwrap();
-    std::fs::copy(
-        made.root.join("calib/cameras.yaml"),
-        dir.path().join("calib/cameras.yaml"),
-    )
-    .unwrap();
-    let yaml = hullpose::config::default_yaml("calib/cameras.yaml", &format!("data/{seq}"));
-    std::fs::write(
-        dir.path().join("pipeline.yaml"),
-        format!("{yaml}{extra_yaml}"),
-    )
-    .unwrap();
     RunDir {
-        dir,
-        truth: src.join("masks"),
+        dir: linked_capture(
+            made,
+            seq,
+            &["frames", "background", "skeleton.yaml"],
+            extra_yaml,
+        ),
+        truth: made.root.join("data").join(seq).join("masks"),
     }
 }
 
@@ -63,41 +49,9 @@ impl RunDir {
 }
 
 fn iou_against_truth(rd: &RunDir) -> (f64, String) {
-    let mut worst = (1.0, String::new());
-    let mut count = 0;
-    for frame in std::fs::read_dir(rd.path().join("cache/silhouette"))
-        .unwrap()
-        .flatten()
-    {
-        if !frame.path().is_dir() {
-            continue;
-        }
-        for img in std::fs::read_dir(frame.path()).unwrap().flatten() {
-            let cam = img
-                .path()
-                .file_stem()
-                .unwrap()
-                .to_string_lossy()
-                .into_owned();
-            let f = frame.file_name().to_string_lossy().into_owned();
-            let ours = image::open(img.path()).unwrap().to_luma8();
-            let truth = image::open(rd.truth.join(&cam).join(format!("{f}.png")))
-                .unwrap()
-                .to_luma8();
-            let (mut i, mut u) = (0usize, 0usize);
-            for (a, b) in ours.as_raw().iter().zip(truth.as_raw()) {
-                i += (*a >= 128 && *b >= 128) as usize;
-                u += (*a >= 128 || *b >= 128) as usize;
-            }
-            let iou = i as f64 / u.max(1) as f64;
-            count += 1;
-            if iou < worst.0 {
-                worst = (iou, format!("{cam} frame {f}"));
-            }
-        }
-    }
+    let (worst, at, count) = worst_silhouette_iou(rd.path(), &rd.truth);
     assert!(count > 0);
-    worst
+    (worst, at)
 }
 
 #[test]

@@ -3,17 +3,19 @@
 //! frames pipeline.yaml selects, and read by every frame's silhouettes.
 //!
 //! Files, under `<cache>/learned_background/<key>/` (the key: what the plates are learned
-//! from, [`key`]): `<camera>.png` (the plate, RGB), `<camera>.share.png` (the share of the
-//! frames that showed it, grey, 255 = every frame) and `learned.yaml` (the frames used and
-//! each camera's undecided share), written last: the plates are complete exactly when it
-//! exists. Each file is written atomically.
+//! from, [`key`]): per camera `<camera>.png` (the steady colour, RGB), `<camera>.share.png`
+//! (the share of the frames that showed it, grey, 255 = every frame),
+//! `<camera>.subject.png` (255 where the steady colour is the subject's) and
+//! `<camera>.chroma.png` (24 x 24, 255 where a chromaticity bin is more the subject's than
+//! the room's); then `learned.yaml` (the frames used and each camera's shares), written
+//! last: the plates are complete exactly when it exists. Each file is written atomically.
 
 use crate::cache::{Cache, KeyBuilder};
 use crate::camera::Camera;
 use crate::error::Result;
-use crate::recon::learned_background::LearnedPlate;
+use crate::recon::learned_background::{Learned, CHROMA_BINS};
 use crate::recon::silhouette::SilhouetteParams;
-use image::{GrayImage, RgbImage};
+use image::GrayImage;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -29,9 +31,14 @@ const FORMAT_VERSION: u32 = 1;
 pub struct LearnedInfo {
     /// The frames the plates were learned from.
     pub frames: Vec<u32>,
-    /// Per camera (calibration order): its name and the share of its pixels that showed no
-    /// steady background in `silhouette.learned_min_share` of the frames (0..1).
+    /// Per camera (calibration order): its name and the share of its pixels whose steady
+    /// colour holds fewer than `silhouette.learned_min_share` of the frames (0..1).
     pub undecided: Vec<(String, f64)>,
+    /// Per camera: its name and the share of its pixels where a part of the subject stays
+    /// (their background never shows), 0..1.
+    pub never_background: Vec<(String, f64)>,
+    /// Per camera: its name and the share of its pixels that changed in some frame, 0..1.
+    pub changed: Vec<(String, f64)>,
 }
 
 /// The plates' key: the learning's parameters, the cameras and the content of every frame
@@ -44,7 +51,9 @@ pub fn key(
     let mut key = KeyBuilder::new();
     key.add("format", &FORMAT_VERSION.to_string())
         .add("tolerance", &format!("{:?}", p.learned_tolerance))
-        .add("min_share", &format!("{:?}", p.learned_min_share));
+        .add("min_share", &format!("{:?}", p.learned_min_share))
+        .add("color_threshold", &format!("{:?}", p.color_threshold))
+        .add("min_brightness", &format!("{:?}", p.min_brightness));
     for (cam, files) in cameras.iter().zip(frame_files) {
         key.add("camera", &cam.name);
         for f in files {
@@ -68,45 +77,79 @@ pub fn existing(cache: &Cache, key: &str) -> Option<LearnedInfo> {
     crate::yaml::read(&info_path(&dir(cache, key))).ok()
 }
 
+/// A 0/255 image of `flags` (row-major, `w` x `h`).
+fn flags_image(w: u32, h: u32, flags: &[bool]) -> GrayImage {
+    GrayImage::from_raw(
+        w,
+        h,
+        flags.iter().map(|&f| if f { 255 } else { 0 }).collect(),
+    )
+    .expect("one flag per pixel")
+}
+
 /// Writes the plates (calibration order) and, last, their record.
 pub fn write(
     cache: &Cache,
     key: &str,
     cameras: &[Camera],
-    plates: &[LearnedPlate],
+    learned: &[Learned],
     info: &LearnedInfo,
 ) -> Result<()> {
     let dir = dir(cache, key);
     crate::fsutil::create_dir_all(&dir)?;
-    for (cam, learned) in cameras.iter().zip(plates) {
-        crate::imageio::write_rgb(&dir.join(format!("{}.png", cam.name)), &learned.plate)?;
-        let (w, h) = learned.plate.dimensions();
+    for (cam, l) in cameras.iter().zip(learned) {
+        let (w, h) = l.plate.dimensions();
+        crate::imageio::write_rgb(&dir.join(format!("{}.png", cam.name)), &l.plate)?;
         let share = GrayImage::from_raw(
             w,
             h,
-            learned
-                .share
+            l.share
                 .iter()
                 .map(|s| (s * 255.0).round().clamp(0.0, 255.0) as u8)
                 .collect(),
         )
         .expect("one share per pixel");
         crate::imageio::write_gray(&dir.join(format!("{}.share.png", cam.name)), &share)?;
+        crate::imageio::write_gray(
+            &dir.join(format!("{}.subject.png", cam.name)),
+            &flags_image(w, h, &l.steady_subject),
+        )?;
+        let bins = CHROMA_BINS as u32;
+        crate::imageio::write_gray(
+            &dir.join(format!("{}.chroma.png", cam.name)),
+            &flags_image(bins, bins, &l.subject_chroma),
+        )?;
     }
     let text = crate::yaml::to_string(info)?;
     crate::fsutil::write_atomic(&info_path(&dir), text.as_bytes())
 }
 
-/// Reads camera `cam`'s plate and per-pixel share (0..1, row-major) of the plates with `key`.
-pub fn read(cache: &Cache, key: &str, cam: &Camera) -> Result<(RgbImage, Vec<f32>)> {
+/// Reads camera `cam`'s learned background from the plates with `key`.
+pub fn read(cache: &Cache, key: &str, cam: &Camera) -> Result<Learned> {
     let dir = dir(cache, key);
+    let grey = |suffix: &str, expected: Option<&Camera>| -> Result<Vec<u8>> {
+        let path = dir.join(format!("{}.{suffix}", cam.name));
+        let img = crate::dataset::decode(&path, expected)?.into_luma8();
+        if expected.is_none() && img.dimensions() != (CHROMA_BINS as u32, CHROMA_BINS as u32) {
+            return Err(crate::error::Error::invalid(
+                &path,
+                format!("is not {CHROMA_BINS} x {CHROMA_BINS}: a damaged cache (delete it)"),
+            ));
+        }
+        Ok(img.into_raw())
+    };
     let plate =
         crate::dataset::decode(&dir.join(format!("{}.png", cam.name)), Some(cam))?.into_rgb8();
-    let share = crate::dataset::decode(&dir.join(format!("{}.share.png", cam.name)), Some(cam))?
-        .into_luma8()
-        .into_raw()
+    let share = grey("share.png", Some(cam))?
         .into_iter()
         .map(|v| v as f32 / 255.0)
         .collect();
-    Ok((plate, share))
+    let flags = |v: Vec<u8>| v.into_iter().map(|b| b >= 128).collect();
+    Ok(Learned {
+        plate,
+        share,
+        steady_subject: flags(grey("subject.png", Some(cam))?),
+        subject_chroma: flags(grey("chroma.png", None)?),
+        changed: f64::NAN, // recorded in learned.yaml
+    })
 }

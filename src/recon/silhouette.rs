@@ -98,6 +98,16 @@ impl Default for SilhouetteParams {
 
 /// The raw foreground decision per pixel (true = subject).
 pub fn classify(frame: &RgbImage, background: &RgbImage, p: &SilhouetteParams) -> Vec<bool> {
+    classify_up_to(frame, background, p, p.max_brightness)
+}
+
+/// [`classify`] with brightness ratios up to `max_brightness` taken as the background's.
+pub fn classify_up_to(
+    frame: &RgbImage,
+    background: &RgbImage,
+    p: &SilhouetteParams,
+    max_brightness: f64,
+) -> Vec<bool> {
     frame
         .pixels()
         .zip(background.pixels())
@@ -109,7 +119,7 @@ pub fn classify(frame: &RgbImage, background: &RgbImage, p: &SilhouetteParams) -
             let cd =
                 ((i[0] - a * b[0]).powi(2) + (i[1] - a * b[1]).powi(2) + (i[2] - a * b[2]).powi(2))
                     .sqrt();
-            cd > p.color_threshold || a < p.min_brightness || a > p.max_brightness
+            cd > p.color_threshold || a < p.min_brightness || a > max_brightness
         })
         .collect()
 }
@@ -294,19 +304,14 @@ pub fn validate(p: &SilhouetteParams) -> std::result::Result<(), crate::error::R
     Ok(())
 }
 
-/// A frame's mask against a learned plate: background subtraction, with every pixel whose
-/// background was never seen (`share` below `p.learned_min_share`) counted as the subject's.
+/// A frame's mask against a learned plate ([`super::learned_background::Learned::subject`]).
 pub fn subtract_learned(
     frame: &RgbImage,
-    plate: &RgbImage,
-    share: &[f32],
+    learned: &super::learned_background::Learned,
     p: &SilhouetteParams,
 ) -> GrayImage {
     let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let mut raw = classify(frame, plate, p);
-    for (r, &s) in raw.iter_mut().zip(share) {
-        *r |= (s as f64) < p.learned_min_share;
-    }
+    let raw = learned.subject(frame, p);
     to_image(&clean(&raw, w, h, p), w, h)
 }
 

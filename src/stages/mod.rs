@@ -124,7 +124,11 @@ impl Inputs<'_> {
 
     /// Camera `cam`'s learned background plate and its per-pixel share, from the plates
     /// with `key` (the silhouette stage's settings hold it, so its key covers them).
-    pub fn learned_plate(&self, key: &str, cam: usize) -> Result<(image::RgbImage, Vec<f32>)> {
+    pub fn learned_plate(
+        &self,
+        key: &str,
+        cam: usize,
+    ) -> Result<crate::recon::learned_background::Learned> {
         crate::artifacts::learned_background::read(self.cache, key, &self.sequence.cameras[cam])
     }
 

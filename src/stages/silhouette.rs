@@ -109,8 +109,8 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
                             .into(),
                     )
                 })?;
-                let (plate, share) = inputs.learned_plate(key, c)?;
-                silhouette::subtract_learned(&seq.load_frame(c, frame)?, &plate, &share, p)
+                let learned = inputs.learned_plate(key, c)?;
+                silhouette::subtract_learned(&seq.load_frame(c, frame)?, &learned, p)
             }
             _ => {
                 let img = seq.load_frame(c, frame)?;
@@ -188,6 +188,8 @@ pub fn learn_plates(
     );
     let mut plates = Vec::with_capacity(seq.cameras.len());
     let mut undecided = Vec::with_capacity(seq.cameras.len());
+    let mut never_background = Vec::with_capacity(seq.cameras.len());
+    let mut changed = Vec::with_capacity(seq.cameras.len());
     for c in 0..seq.cameras.len() {
         // One camera's frames at a time: 60 frames of 1920x1080 are 370 MB.
         let images: Vec<image::RgbImage> = frames
@@ -195,16 +197,21 @@ pub fn learn_plates(
             .map(|&f| seq.load_frame(c, f))
             .collect::<Result<_>>()?;
         let refs: Vec<&image::RgbImage> = images.iter().collect();
-        let learned = crate::recon::learned_background::learn(&refs, p.learned_tolerance);
-        undecided.push((
-            seq.cameras[c].name.clone(),
-            learned.never_background(p.learned_min_share),
-        ));
+        let learned = crate::recon::learned_background::learn(&refs, p);
+        let name = seq.cameras[c].name.clone();
+        undecided.push((name.clone(), learned.undecided(p.learned_min_share)));
+        never_background.push((name.clone(), learned.never_background()));
+        changed.push((name, learned.changed));
         plates.push(learned);
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let info = LearnedInfo { frames, undecided };
+    let info = LearnedInfo {
+        frames,
+        undecided,
+        never_background,
+        changed,
+    };
     // Refused before anything is written: a rerun refuses again, by name.
     refuse_undecided(config, &info)?;
     learned_background::write(cache, &key, &seq.cameras, &plates, &info)?;
@@ -215,8 +222,30 @@ pub fn learn_plates(
     }))
 }
 
+/// Below this share of its pixels changing over the frames, a camera saw nothing move.
+const MIN_CHANGED: f64 = 1e-4;
+
 fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
     let p = &config.silhouette;
+    let still: Vec<&str> = info
+        .changed
+        .iter()
+        .filter(|(_, share)| *share < MIN_CHANGED)
+        .map(|(cam, _)| cam.as_str())
+        .collect();
+    if !still.is_empty() {
+        return Err(Error::invalid(
+            &config.path,
+            format!(
+                "silhouette.method 'learned': nothing moved in camera(s) {} over the {} frames \
+                 learned from, so nothing tells the subject from the room: learning needs \
+                 frames where the subject moves. Select more frames (`frames`), or give \
+                 background plates (background/<camera>.png) or masks (masks/<camera>/)",
+                still.join(", "),
+                info.frames.len()
+            ),
+        ));
+    }
     let bad: Vec<String> = info
         .undecided
         .iter()
@@ -244,20 +273,24 @@ fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
 
 /// One line on the learned plates, for `pipeline check` and the run's summary.
 pub fn learning_report(learning: &Learning) -> String {
-    let undecided: Vec<String> = learning
+    let cameras: Vec<String> = learning
         .info
-        .undecided
+        .never_background
         .iter()
-        .map(|(cam, share)| format!("{cam} {:.1}%", 100.0 * share))
+        .zip(&learning.info.undecided)
+        .map(|((cam, never), (_, undecided))| {
+            format!("{cam} {:.1}% / {:.1}%", 100.0 * never, 100.0 * undecided)
+        })
         .collect();
     format!(
-        "learned background: {} from {} frames; never background (counted as the subject's): {}",
+        "learned background: {} from {} frames; per camera, the image's share where a part of \
+         the subject stays (never background) / with no steady colour (taken as the subject): {}",
         if learning.computed {
             "learned"
         } else {
             "reused"
         },
         learning.info.frames.len(),
-        undecided.join(", ")
+        cameras.join(", ")
     )
 }

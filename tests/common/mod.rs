@@ -271,6 +271,86 @@ pub fn run_folder(made: &Made, seq: &str, extra: &str) -> tempfile::TempDir {
     dir
 }
 
+/// A run folder holding links to `entries` of a shared synthetic capture's sequence
+/// (`frames`, `background`, `skeleton.yaml`, ...; the rest, such as the true masks, left
+/// out), a copy of its calibration and the default pipeline.yaml with `extra_yaml` appended;
+/// it keeps its own cache.
+pub fn linked_capture(
+    made: &Made,
+    seq: &str,
+    entries: &[&str],
+    extra_yaml: &str,
+) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let src = made.root.join("data").join(seq);
+    let dst = dir.path().join("data").join(seq);
+    std::fs::create_dir_all(&dst).unwrap();
+    for entry in entries {
+        std::os::unix::fs::symlink(src.join(entry), dst.join(entry)).unwrap();
+    }
+    std::fs::create_dir_all(dir.path().join("calib")).unwrap();
+    std::fs::copy(
+        made.root.join("calib/cameras.yaml"),
+        dir.path().join("calib/cameras.yaml"),
+    )
+    .unwrap();
+    let yaml = hullpose::config::default_yaml("calib/cameras.yaml", &format!("data/{seq}"));
+    std::fs::write(
+        dir.path().join("pipeline.yaml"),
+        format!("{yaml}{extra_yaml}"),
+    )
+    .unwrap();
+    dir
+}
+
+/// The silhouette IoU of two masks (>= 128 is the subject; 1 when both are empty).
+pub fn mask_iou(a: &image::GrayImage, b: &image::GrayImage) -> f64 {
+    let (mut both, mut either) = (0usize, 0usize);
+    for (x, y) in a.as_raw().iter().zip(b.as_raw()) {
+        both += (*x >= 128 && *y >= 128) as usize;
+        either += (*x >= 128 || *y >= 128) as usize;
+    }
+    if either == 0 {
+        1.0
+    } else {
+        both as f64 / either as f64
+    }
+}
+
+/// The worst IoU of a run folder's silhouettes (`cache/silhouette`) against the true masks
+/// under `truth` (`<camera>/NNNNNN.png`): the IoU, which camera and frame, and how many
+/// images were compared.
+pub fn worst_silhouette_iou(run: &Path, truth: &Path) -> (f64, String, usize) {
+    let mut worst = (1.0, String::new(), 0);
+    for frame in std::fs::read_dir(run.join("cache/silhouette"))
+        .unwrap()
+        .flatten()
+    {
+        if !frame.path().is_dir() {
+            continue;
+        }
+        let f = frame.file_name().to_string_lossy().into_owned();
+        for img in std::fs::read_dir(frame.path()).unwrap().flatten() {
+            let cam = img
+                .path()
+                .file_stem()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            let ours = image::open(img.path()).unwrap().to_luma8();
+            let true_mask = image::open(truth.join(&cam).join(format!("{f}.png")))
+                .unwrap()
+                .to_luma8();
+            let v = mask_iou(&ours, &true_mask);
+            worst.2 += 1;
+            if v < worst.0 {
+                worst = (v, format!("{cam} frame {f}"), worst.2);
+            }
+        }
+    }
+    worst
+}
+
 /// Rows (frame, stage, accuracy90, completeness) of `output/evaluation/reconstruction.csv`
 /// in a run folder.
 pub fn reconstruction_rows(dir: &Path) -> Vec<ReconRow> {
