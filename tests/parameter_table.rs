@@ -158,6 +158,7 @@ const CHANGED: &[(&str, &str)] = &[
     ("fit.health.iou_drop", "0.8"),
     ("fit.health.max_joint_speed", "5"),
     ("fit.health.unexplained_cm2", "10"),
+    ("fit.health.surface_reach", "0.03"),
     ("fit.method", "rho_c"),
     ("fit.min_observed_share", "0.1"),
     ("fit.model_spacing", "0.012"),

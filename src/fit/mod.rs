@@ -29,6 +29,7 @@ mod recovery;
 pub mod result;
 mod round;
 pub mod solve;
+pub mod surface_layer;
 pub mod tracking;
 
 pub use crate::skeleton::sides::{is_left, other_side};

@@ -192,6 +192,11 @@ pub struct HealthParams {
     /// least 0.5) farther than 3 cm from the model, cm^2. Default 8 (a fit from the true
     /// pose leaves 0-2 on the humanoid's dance, a hand folded back 9-18).
     pub unexplained_cm2: f64,
+    /// The silhouette IoU above is measured on the posed model moved onto the frame's
+    /// observed surface where that lies within this reach, metres ([`super::surface_layer`]):
+    /// clothing and surface detail the rigidly skinned model cannot follow do not count
+    /// against the pose, a limb farther off does. 0: the posed model as it is. Default 0.05.
+    pub surface_reach: f64,
     /// A frame is flagged, and recovered, when two parts that do not meet at a joint overlap
     /// deeper than this (their flesh as capsules, beyond their overlap at the reference
     /// pose; `interpenetration.rs`), cm. Default 6 (the dance's true poses reach 3.8 where a
@@ -210,6 +215,7 @@ impl Default for HealthParams {
             iou_drop: 0.9,
             iou_drift: 0.9,
             unexplained_cm2: 8.0,
+            surface_reach: 0.05,
             interpenetration_cm: 6.0,
             energy_jump: 10.0,
         }
@@ -329,6 +335,14 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), Refusal> {
             "fit.health: unexplained_cm2 must be a positive area in cm^2, interpenetration_cm a \
              positive depth in cm and energy_jump a ratio >= 1, got {}, {} and {}",
             h.unexplained_cm2, h.interpenetration_cm, h.energy_jump
+        )
+        .into());
+    }
+    if !(h.surface_reach.is_finite() && (0.0..=0.5).contains(&h.surface_reach)) {
+        return Err(format!(
+            "fit.health.surface_reach must be a distance between 0 and 0.5 m (default 0.05), \
+             got {}",
+            h.surface_reach
         )
         .into());
     }

@@ -83,7 +83,12 @@ pub fn write(job: &Job) -> Result<Written> {
                 }
             }
             let masks = crate::artifacts::silhouettes::read(cache, f, cameras)?;
-            let posed = coarse.posed(&model.pose(&pose));
+            // Measured as the fit's health measures it (fit.csv's IoU).
+            let posed = crate::fit::surface_layer::follow(
+                &coarse.posed(&model.pose(&pose)),
+                &crate::artifacts::observation::read(cache, f)?.vertices,
+                job.config.fit.health.surface_reach,
+            );
             let iou = silhouette_iou(cameras, &masks, &posed)
                 .into_iter()
                 .map(|x| (x * 1e4).round() / 1e4)

@@ -337,14 +337,12 @@ fn fitted_frame(
     let poses_csv = crate::poses::to_csv(skeleton, &[(frame, result.pose.clone())]);
     let joints_csv = crate::joints::to_csv(&joint_rows(skeleton, frame, &result.pose));
     let mesh = model.pose(&result.pose);
-    let mut health = frame_health(
-        inputs,
-        model,
-        frame,
-        &result.pose,
-        previous_pose,
+    let measured = crate::fit::surface_layer::follow(
         &checks.coarse.posed(&mesh),
-    )?;
+        &inputs.observation(frame)?.vertices,
+        settings.fit.health.surface_reach,
+    );
+    let mut health = frame_health(inputs, model, frame, &result.pose, previous_pose, &measured)?;
     health.interpenetration = checks
         .capsules
         .deepest(model, &result.pose)
@@ -403,8 +401,8 @@ fn fitted_frame(
     Ok((Produced::new(artifact, warnings), state))
 }
 
-/// A fitted frame's health: the posed model (`mesh`, coarse) against the frame's
-/// silhouettes, and its joints' motion from the previous tracked frame's pose.
+/// A fitted frame's health: the posed model (`mesh`, coarse, moved onto the observed
+/// surface within `fit.health.surface_reach`) against the frame's silhouettes, and its joints' motion from the previous tracked frame's pose.
 fn frame_health(
     inputs: &Inputs,
     model: &BodyModel,
