@@ -210,14 +210,15 @@ fn made_images(made: &Made, seq: &str) -> usize {
 
 #[test]
 fn the_humanoid_tracked_from_learned_masks_stays_within_its_bound() {
-    // Half the motion (hands on the hips, forearms crossed on the chest), 15 cameras,
-    // 384x288: the whole pipeline on masks learned without plates.
-    let dir = no_plates(humanoid(), "humanoid", "0..11");
+    // The hands moving onto the hips and resting there (frames 0..5), 15 cameras, 384x288:
+    // the whole pipeline on masks learned without plates from these six frames (the whole
+    // motion at 1024x768: BENCHMARKS.md).
+    let dir = no_plates(humanoid(), "humanoid", "0..5");
     let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], dir.path());
     assert!(ok, "{err}");
     let errors = output_joint_errors_cm(dir.path(), "humanoid");
     eprintln!("mean joint error per frame, cm: {errors:.2?}");
-    assert_eq!(errors.len(), 12, "{out}");
+    assert_eq!(errors.len(), 6, "{out}");
     let worst = errors.iter().copied().fold(0.0, f64::max);
     assert!(worst <= 1.5, "worst frame {worst:.2} cm: {errors:.2?}");
 }
