@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 pub const FOLDER: &str = "learned_background";
 
 /// Bumped whenever the learning or the files change.
-const FORMAT_VERSION: u32 = 1;
+const FORMAT_VERSION: u32 = 2;
 
 /// What `learned.yaml` records.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -31,14 +31,22 @@ const FORMAT_VERSION: u32 = 1;
 pub struct LearnedInfo {
     /// The frames the plates were learned from.
     pub frames: Vec<u32>,
-    /// Per camera (calibration order): its name and the share of its pixels whose steady
-    /// colour holds fewer than `silhouette.learned_min_share` of the frames (0..1).
-    pub undecided: Vec<(String, f64)>,
-    /// Per camera: its name and the share of its pixels where a part of the subject stays
-    /// (their background never shows), 0..1.
-    pub never_background: Vec<(String, f64)>,
-    /// Per camera: its name and the share of its pixels that changed in some frame, 0..1.
-    pub changed: Vec<(String, f64)>,
+    /// Per camera, in calibration order.
+    pub cameras: Vec<CameraShares>,
+}
+
+/// What one camera's learning found, as shares of its pixels (0..1).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CameraShares {
+    pub camera: String,
+    /// Pixels whose steady colour holds fewer than `silhouette.learned_min_share` of the
+    /// frames.
+    pub undecided: f64,
+    /// Pixels where a part of the subject stays (their background never shows).
+    pub never_background: f64,
+    /// Pixels that changed in some frame.
+    pub changed: f64,
 }
 
 /// The plates' key: the learning's parameters, the cameras and the content of every frame
@@ -150,6 +158,5 @@ pub fn read(cache: &Cache, key: &str, cam: &Camera) -> Result<Learned> {
         share,
         steady_subject: flags(grey("subject.png", Some(cam))?),
         subject_chroma: flags(grey("chroma.png", None)?),
-        changed: f64::NAN, // recorded in learned.yaml
     })
 }

@@ -21,16 +21,16 @@ const SMOOTHING_ROUNDS: usize = 2;
 /// `posed` with each vertex moved to its nearest `observed` point when that lies within
 /// `reach` metres, the moves averaged with the neighbours' [`SMOOTHING_ROUNDS`] times. A
 /// reach of 0, or no observed point, leaves it as it is.
-pub fn follow(posed: &TriMesh, observed: &[Vector3<f32>], reach: f64) -> TriMesh {
+pub fn follow(posed: &TriMesh, observed: &[Vector3<f64>], reach: f64) -> TriMesh {
     if reach <= 0.0 || observed.is_empty() {
         return posed.clone();
     }
-    let tree = NearestTree::from_keys(observed.iter().map(|v| [v.x, v.y, v.z]).collect());
+    let tree = NearestTree::new(observed);
     let mut moves: Vec<Vector3<f64>> = posed
         .vertices
         .par_iter()
         .map(|v| match tree.nearest(v) {
-            Some((j, d2)) if d2 <= reach * reach => observed[j].cast::<f64>() - v,
+            Some((j, d2)) if d2 <= reach * reach => observed[j] - v,
             _ => Vector3::zeros(),
         })
         .collect();
@@ -66,10 +66,6 @@ pub fn follow(posed: &TriMesh, observed: &[Vector3<f32>], reach: f64) -> TriMesh
 mod tests {
     use super::*;
 
-    fn points(m: TriMesh) -> Vec<Vector3<f32>> {
-        m.vertices.iter().map(|v| v.cast()).collect()
-    }
-
     /// A sphere meshed from its distance field (5 mm samples).
     fn sphere(r: f64, centre: Vector3<f64>) -> TriMesh {
         use crate::geometry::isosurface::{extract, ScalarGrid};
@@ -82,14 +78,14 @@ mod tests {
     #[test]
     fn a_surface_within_reach_is_followed_and_one_beyond_it_is_not() {
         let model = sphere(0.10, Vector3::zeros());
-        let observed = points(sphere(0.13, Vector3::zeros()));
+        let observed = sphere(0.13, Vector3::zeros()).vertices;
         // 3 cm out: within a 5 cm reach, the model takes the observed radius.
         let followed = follow(&model, &observed, 0.05);
         for v in &followed.vertices {
             assert!((v.norm() - 0.13).abs() < 0.005, "{}", v.norm());
         }
         // Beyond the reach (an observed sphere 30 cm away): nothing moves.
-        let far = points(sphere(0.10, Vector3::new(0.4, 0.0, 0.0)));
+        let far = sphere(0.10, Vector3::new(0.4, 0.0, 0.0)).vertices;
         assert_eq!(follow(&model, &far, 0.05).vertices, model.vertices);
         assert_eq!(follow(&model, &observed, 0.0).vertices, model.vertices);
     }

@@ -54,9 +54,6 @@ pub struct Learned {
     /// Whether a chromaticity bin (`r_bin + CHROMA_BINS * g_bin`) is more the subject's
     /// than the room's.
     pub subject_chroma: Vec<bool>,
-    /// The share of the image's pixels that changed in some frame (0: nothing moved, and
-    /// nothing tells the subject from the room).
-    pub changed: f64,
 }
 
 impl Learned {
@@ -112,8 +109,10 @@ fn chroma_bin(c: [u8; 3]) -> usize {
     bin(c[0]) + CHROMA_BINS * bin(c[1])
 }
 
-/// Learns one camera's background from its frames (all of one size, at least one).
-pub fn learn(frames: &[&RgbImage], p: &SilhouetteParams) -> Learned {
+/// Learns one camera's background from its frames (all of one size, at least one); also
+/// the share of the image's pixels that changed in some frame (0: nothing moved, and
+/// nothing tells the subject from the room).
+pub fn learn(frames: &[&RgbImage], p: &SilhouetteParams) -> (Learned, f64) {
     let (plate, share) = steady_colours(frames, p.learned_tolerance);
     let (w, h) = (plate.width() as usize, plate.height() as usize);
     // Step 2: the parts that moved give the subject's colours, the steady pixels far from
@@ -149,13 +148,16 @@ pub fn learn(frames: &[&RgbImage], p: &SilhouetteParams) -> Learned {
     } else {
         vec![false; w * h] // nothing moved: nothing tells the subject's colours
     };
-    Learned {
-        plate,
-        share,
-        steady_subject,
-        subject_chroma,
-        changed: share_of(ever_changed.into_iter()),
-    }
+    let changed = share_of(ever_changed.into_iter());
+    (
+        Learned {
+            plate,
+            share,
+            steady_subject,
+            subject_chroma,
+        },
+        changed,
+    )
 }
 
 /// Step 1: each pixel's steady colour and the share of frames showing it.
@@ -407,7 +409,7 @@ mod tests {
         let (room, frames, truth) = scene();
         let refs: Vec<&RgbImage> = frames.iter().collect();
         let p = SilhouetteParams::default();
-        let learned = learn(&refs, &p);
+        let (learned, _) = learn(&refs, &p);
         // The room is learned where it shows; the torso is the subject's.
         let (w, _) = room.dimensions();
         assert_eq!(learned.plate.get_pixel(3, 3), room.get_pixel(3, 3));

@@ -66,6 +66,7 @@ pub fn write(job: &Job) -> Result<Written> {
     let up = |v: &Vector3<f64>| c * v;
     let coarse = CoarseModel::new(&model.mesh, MODEL_CELL);
     let frames = job.frames.clone();
+    let ctx = job.context();
 
     // Each frame's bone matrices [C R C^T | C (h - R h0)] (world turned Y-up), and the
     // per-camera silhouette IoU of the posed model.
@@ -86,7 +87,7 @@ pub fn write(job: &Job) -> Result<Written> {
             // Measured as the fit's health measures it (fit.csv's IoU).
             let posed = crate::fit::surface_layer::follow(
                 &coarse.posed(&model.pose(&pose)),
-                &crate::artifacts::observation::read(cache, f)?.vertices,
+                &crate::stages::fit::cached_observation(&ctx, f)?.vertices,
                 job.config.fit.health.surface_reach,
             );
             let iou = silhouette_iou(cameras, &masks, &posed)

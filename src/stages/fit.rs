@@ -117,14 +117,15 @@ fn as_observation(o: crate::recon::reliability::Observed) -> Observation {
 /// them: t0 first, or resuming after frames already cached) with `params`: the one path of
 /// `pipeline run` and `pipeline bench track`. Each frame's fit starts from its neighbour's
 /// pose in memory; a neighbour not among `frames` is read back from the cache. After each
-/// frame, `done` gets its fit and the seconds the fit took (loading excluded).
+/// frame, `done` gets its fit, its observed surface and the seconds the fit took (loading
+/// excluded).
 fn track(
     inputs: &Inputs,
     settings: &Settings,
     model: &BodyModel,
     frames: &[u32],
     probe: &Probe,
-    done: &mut dyn FnMut(u32, &FitResult, f64) -> Result<()>,
+    done: &mut dyn FnMut(u32, &FitResult, &Observation, f64) -> Result<()>,
 ) -> Result<()> {
     let t0 = model.skeleton.reference_frame;
     let seq = inputs.sequence;
@@ -161,7 +162,7 @@ fn track(
         let obs = observation(inputs, frame)?;
         let started = std::time::Instant::now();
         let result = tracker.fit(frame, &obs, neighbours, probe);
-        done(frame, &result, started.elapsed().as_secs_f64())?;
+        done(frame, &result, &obs, started.elapsed().as_secs_f64())?;
     }
     Ok(())
 }
@@ -191,7 +192,7 @@ pub fn track_in_memory(
         &model,
         frames,
         &probe,
-        &mut |frame, result, secs| {
+        &mut |frame, result, _, secs| {
             seconds.push((frame, secs));
             rounds.extend(probe.take_rounds().into_iter().map(|r| (frame, r)));
             out.push((frame, result.clone()));
@@ -244,7 +245,7 @@ fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> 
         &model,
         frames,
         &probe,
-        &mut |frame, result, secs| {
+        &mut |frame, result, obs, secs| {
             // The run keeps no round log: dropped frame by frame, so it never grows.
             probe.take_rounds();
             // The previous tracked frames, nearest first.
@@ -292,6 +293,7 @@ fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> 
                 previous_energy,
                 frame,
                 result,
+                obs,
             )?;
             states.insert(frame, produced.1);
             // Only the last few frames and t0 are read again (others come from the cache).
@@ -332,6 +334,7 @@ fn fitted_frame(
     previous_energy: Option<f64>,
     frame: u32,
     result: &FitResult,
+    observed: &Observation,
 ) -> Result<(Produced, FitState)> {
     let skeleton = &model.skeleton;
     let poses_csv = crate::poses::to_csv(skeleton, &[(frame, result.pose.clone())]);
@@ -339,7 +342,7 @@ fn fitted_frame(
     let mesh = model.pose(&result.pose);
     let measured = crate::fit::surface_layer::follow(
         &checks.coarse.posed(&mesh),
-        &inputs.observation(frame)?.vertices,
+        &observed.vertices,
         settings.fit.health.surface_reach,
     );
     let mut health = frame_health(inputs, model, frame, &result.pose, previous_pose, &measured)?;
@@ -402,7 +405,8 @@ fn fitted_frame(
 }
 
 /// A fitted frame's health: the posed model (`mesh`, coarse, moved onto the observed
-/// surface within `fit.health.surface_reach`) against the frame's silhouettes, and its joints' motion from the previous tracked frame's pose.
+/// surface within `fit.health.surface_reach`) against the frame's silhouettes, and its
+/// joints' motion from the previous tracked frame's pose.
 fn frame_health(
     inputs: &Inputs,
     model: &BodyModel,

@@ -122,8 +122,8 @@ impl Inputs<'_> {
         crate::artifacts::silhouettes::read(self.cache, frame, &self.sequence.cameras)
     }
 
-    /// Camera `cam`'s learned background plate and its per-pixel share, from the plates
-    /// with `key` (the silhouette stage's settings hold it, so its key covers them).
+    /// Camera `cam`'s learned background, from the plates with `key` (the silhouette
+    /// stage's settings hold it, so its key covers them).
     pub fn learned_plate(
         &self,
         key: &str,

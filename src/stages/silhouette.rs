@@ -2,7 +2,7 @@
 //! asked), or background subtraction against the plates or one constant colour.
 
 use super::{Inputs, PerFrame, Produced};
-use crate::artifacts::learned_background::{self, LearnedInfo};
+use crate::artifacts::learned_background::{self, CameraShares, LearnedInfo};
 use crate::artifacts::silhouettes::Silhouettes;
 use crate::cache::KeyBuilder;
 use crate::config::Config;
@@ -187,9 +187,7 @@ pub fn learn_plates(
             .progress_chars("=> "),
     );
     let mut plates = Vec::with_capacity(seq.cameras.len());
-    let mut undecided = Vec::with_capacity(seq.cameras.len());
-    let mut never_background = Vec::with_capacity(seq.cameras.len());
-    let mut changed = Vec::with_capacity(seq.cameras.len());
+    let mut shares = Vec::with_capacity(seq.cameras.len());
     for c in 0..seq.cameras.len() {
         // One camera's frames at a time: 60 frames of 1920x1080 are 370 MB.
         let images: Vec<image::RgbImage> = frames
@@ -197,20 +195,20 @@ pub fn learn_plates(
             .map(|&f| seq.load_frame(c, f))
             .collect::<Result<_>>()?;
         let refs: Vec<&image::RgbImage> = images.iter().collect();
-        let learned = crate::recon::learned_background::learn(&refs, p);
-        let name = seq.cameras[c].name.clone();
-        undecided.push((name.clone(), learned.undecided(p.learned_min_share)));
-        never_background.push((name.clone(), learned.never_background()));
-        changed.push((name, learned.changed));
+        let (learned, moved) = crate::recon::learned_background::learn(&refs, p);
+        shares.push(CameraShares {
+            camera: seq.cameras[c].name.clone(),
+            undecided: learned.undecided(p.learned_min_share),
+            never_background: learned.never_background(),
+            changed: moved,
+        });
         plates.push(learned);
         bar.inc(1);
     }
     bar.finish_and_clear();
     let info = LearnedInfo {
         frames,
-        undecided,
-        never_background,
-        changed,
+        cameras: shares,
     };
     // Refused before anything is written: a rerun refuses again, by name.
     refuse_undecided(config, &info)?;
@@ -228,10 +226,10 @@ const MIN_CHANGED: f64 = 1e-4;
 fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
     let p = &config.silhouette;
     let still: Vec<&str> = info
-        .changed
+        .cameras
         .iter()
-        .filter(|(_, share)| *share < MIN_CHANGED)
-        .map(|(cam, _)| cam.as_str())
+        .filter(|c| c.changed < MIN_CHANGED)
+        .map(|c| c.camera.as_str())
         .collect();
     if !still.is_empty() {
         return Err(Error::invalid(
@@ -247,10 +245,10 @@ fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
         ));
     }
     let bad: Vec<String> = info
-        .undecided
+        .cameras
         .iter()
-        .filter(|(_, share)| *share > p.learned_max_undecided)
-        .map(|(cam, share)| format!("{cam} ({:.1}%)", 100.0 * share))
+        .filter(|c| c.undecided > p.learned_max_undecided)
+        .map(|c| format!("{} ({:.1}%)", c.camera, 100.0 * c.undecided))
         .collect();
     if bad.is_empty() {
         return Ok(());
@@ -275,11 +273,15 @@ fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
 pub fn learning_report(learning: &Learning) -> String {
     let cameras: Vec<String> = learning
         .info
-        .never_background
+        .cameras
         .iter()
-        .zip(&learning.info.undecided)
-        .map(|((cam, never), (_, undecided))| {
-            format!("{cam} {:.1}% / {:.1}%", 100.0 * never, 100.0 * undecided)
+        .map(|c| {
+            format!(
+                "{} {:.1}% / {:.1}%",
+                c.camera,
+                100.0 * c.never_background,
+                100.0 * c.undecided
+            )
         })
         .collect();
     format!(
