@@ -178,4 +178,6 @@ fn a_dress_and_no_open_pose_at_the_start_are_embedded_and_tracked() {
     eprintln!("arms down, tracked: mean joint error per frame (cm): {errors:.2?}");
     assert_eq!(errors.len(), 16);
     assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
+    // A good track through the dress: no frame flagged, none below 0.9 x the reference IoU.
+    assert_fit_health(d);
 }
