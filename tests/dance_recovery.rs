@@ -72,6 +72,19 @@ fn the_dance_is_tracked_and_a_lost_hand_is_recovered() {
         .map(|f| hand("output_no_prior_no_recovery", f))
         .collect();
     assert!(lost.iter().all(|&e| e > 15.0), "{lost:.1?}");
+    // The hand folded back onto the forearm is flagged on every frame where it lies over 20
+    // cm off (`bent_joint`); at 10-20 cm it may still bend like a wrist.
+    let health =
+        hullpose::eval::health_table::read(&d.join("output_no_prior_no_recovery")).unwrap();
+    for r in &health {
+        let off = hand("output_no_prior_no_recovery", r.frame);
+        assert!(
+            off <= 20.0 || r.flags.contains("bent_joint"),
+            "frame {}: hand {off:.1} cm off, flags '{}'",
+            r.frame,
+            r.flags
+        );
+    }
 }
 
 /// The right hand's tip's distance to the truth at `frame` in `output/joints.csv`, cm.

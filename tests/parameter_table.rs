@@ -152,6 +152,7 @@ const CHANGED: &[(&str, &str)] = &[
     ("fit.contact.rest_distance", "0.08"),
     ("fit.contact.rule", "adjacent"),
     ("fit.contact.tau_c", "0.03"),
+    ("fit.health.bend_deg", "100"),
     ("fit.health.energy_jump", "8"),
     ("fit.health.interpenetration_cm", "5"),
     ("fit.health.iou_drift", "0.8"),

@@ -9,6 +9,7 @@
 
 use crate::camera::Camera;
 use crate::geometry::TriMesh;
+use crate::skeleton::{Pose, Skeleton};
 use image::GrayImage;
 use rayon::prelude::*;
 
@@ -34,6 +35,9 @@ pub struct Health {
     /// The deepest overlap of two parts that do not meet, beyond the reference pose's,
     /// metres (0: none; [`crate::fit::interpenetration`]).
     pub interpenetration: f64,
+    /// The sharpest swing of an end bone from its reference direction relative to its
+    /// parent, degrees ([`sharpest_end_bend`]).
+    pub end_bend_deg: f64,
     /// Eq. 4 against the previous tracked frame's (0: unknown).
     pub energy_ratio: f64,
 }
@@ -147,8 +151,28 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
         joint_motion,
         unexplained_cm2: None,
         interpenetration: 0.0,
+        end_bend_deg: 0.0,
         energy_ratio: 0.0,
     }
+}
+
+/// The end bone (a bone without children: a hand, a foot, the head) that `pose` swings
+/// farthest from its reference direction relative to its parent, and that swing, degrees:
+/// the angle between the bone's reference direction d and R d, R its rotation relative to
+/// t0 in its parent's posed frame (a turn about the bone's own axis does not count). A hand
+/// folded back onto its forearm swings further than a wrist moves; `None` without end bones.
+pub fn sharpest_end_bend(skeleton: &Skeleton, pose: &Pose) -> Option<(usize, f64)> {
+    skeleton
+        .children()
+        .iter()
+        .enumerate()
+        .filter(|(b, c)| c.is_empty() && skeleton.bones[*b].parent.is_some())
+        .map(|(b, _)| {
+            let bone = &skeleton.bones[b];
+            let d = bone.tail - bone.head;
+            (b, (pose.rotations[b] * d).angle(&d).to_degrees())
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))
 }
 
 /// How many previous frames make a frame's recent silhouette level.
@@ -161,7 +185,8 @@ pub const RECENT_FRAMES: usize = 5;
 /// only its last [`RECENT_FRAMES`] count), `iou_drift` when it fell below `p.iou_drift` times
 /// `reference` (the reference frame's worst IoU; none at the reference frame), `unexplained` when the fit left at least
 /// `p.unexplained_cm2` of reliable observed surface unexplained, `interpenetration` when two
-/// parts overlap deeper than `p.interpenetration_cm`, `energy_jump` when eq. 4 rose more
+/// parts overlap deeper than `p.interpenetration_cm`, `bent_joint` when an end bone swung
+/// more than `p.bend_deg` from its reference direction, `energy_jump` when eq. 4 rose more
 /// than `p.energy_jump` times the previous frame's.
 pub fn flags(
     h: &Health,
@@ -186,6 +211,9 @@ pub fn flags(
     }
     if 100.0 * h.interpenetration >= p.interpenetration_cm {
         out.push("interpenetration");
+    }
+    if h.end_bend_deg > p.bend_deg {
+        out.push("bent_joint");
     }
     if h.energy_ratio > p.energy_jump {
         out.push("energy_jump");
@@ -250,6 +278,7 @@ mod tests {
         let mut lost = summarize(&[0.7, 0.96], 0.3);
         lost.unexplained_cm2 = Some(12.0);
         lost.interpenetration = 0.08;
+        lost.end_bend_deg = 150.0;
         lost.energy_ratio = 12.0;
         assert_eq!(
             flags(&lost, &[0.96], Some(0.96), &p, Some(25.0)),
@@ -259,17 +288,28 @@ mod tests {
                 "iou_drift",
                 "unexplained",
                 "interpenetration",
+                "bent_joint",
                 "energy_jump"
             ]
         );
         assert_eq!(
             flags(&lost, &[], None, &p, Some(10.0)),
-            ["unexplained", "interpenetration", "energy_jump"]
+            [
+                "unexplained",
+                "interpenetration",
+                "bent_joint",
+                "energy_jump"
+            ]
         );
         // An unknown frame rate judges no speed.
         assert_eq!(
             flags(&lost, &[], None, &p, None),
-            ["unexplained", "interpenetration", "energy_jump"]
+            [
+                "unexplained",
+                "interpenetration",
+                "bent_joint",
+                "energy_jump"
+            ]
         );
         // A slow drift: level with the recent frames, far below the reference.
         let drifted = summarize(&[0.8, 0.9], 0.0);

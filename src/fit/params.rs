@@ -202,6 +202,12 @@ pub struct HealthParams {
     /// pose; `interpenetration.rs`), cm. Default 6 (the dance's true poses reach 3.8 where a
     /// hand presses on the other forearm).
     pub interpenetration_cm: f64,
+    /// A frame is flagged `bent_joint`, and recovered, when an end bone (a hand, a foot, the
+    /// head: a bone without children) swings more than this from its reference direction
+    /// relative to its parent ([`super::health::sharpest_end_bend`]), degrees. Default 120:
+    /// a wrist or an ankle moves within about 90 degrees; the dance's right hand folded back
+    /// onto its forearm swings 146-163 (BENCHMARKS.md has the real dancer's).
+    pub bend_deg: f64,
     /// A frame is flagged when its eq. 4 energy is more than this times the larger of the
     /// two previous tracked frames'. Default 10 (on a masks-only capture, where the hull's
     /// phantom volumes are observed surface, eq. 4 varies by 3x between good frames).
@@ -217,6 +223,7 @@ impl Default for HealthParams {
             unexplained_cm2: 8.0,
             surface_reach: 0.05,
             interpenetration_cm: 6.0,
+            bend_deg: 120.0,
             energy_jump: 10.0,
         }
     }
@@ -335,6 +342,13 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), Refusal> {
             "fit.health: unexplained_cm2 must be a positive area in cm^2, interpenetration_cm a \
              positive depth in cm and energy_jump a ratio >= 1, got {}, {} and {}",
             h.unexplained_cm2, h.interpenetration_cm, h.energy_jump
+        )
+        .into());
+    }
+    if !(h.bend_deg > 0.0 && h.bend_deg <= 180.0) {
+        return Err(format!(
+            "fit.health.bend_deg must be an angle in (0, 180] degrees (default 120), got {}",
+            h.bend_deg
         )
         .into());
     }

@@ -30,7 +30,8 @@ impl Fitter<'_> {
     /// Why `fit` (from the previous frame's `previous`) needs recovery, if it does: the
     /// unexplained observed surface above `fit.health.unexplained_cm2` (where rho_p is
     /// photo-consistency), two parts overlapping deeper than
-    /// `fit.health.interpenetration_cm`, or a joint moved
+    /// `fit.health.interpenetration_cm`, an end bone swung further than
+    /// `fit.health.bend_deg`, or a joint moved
     /// farther than the fastest plausible motion allows between two frames.
     pub(super) fn needs_recovery(&self, fit: &FitResult, previous: &Pose) -> Option<&'static str> {
         let area = unexplained_cm2(&fit.diagnostics, self.params.sample_spacing);
@@ -43,6 +44,10 @@ impl Fitter<'_> {
             .map_or(0.0, |x| x.2);
         if 100.0 * overlap >= self.params.health.interpenetration_cm {
             return Some("interpenetration");
+        }
+        let bend = super::health::sharpest_end_bend(&self.model.skeleton, &fit.pose);
+        if bend.is_some_and(|(_, deg)| deg > self.params.health.bend_deg) {
+            return Some("bent_joint");
         }
         let step = self.max_joint_step?;
         (super::joint_motion(self.model, previous, &fit.pose) > step).then_some("fast_joint")

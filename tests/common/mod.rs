@@ -499,6 +499,29 @@ pub fn assert_fit_health(dir: &Path) {
     }
 }
 
+/// fit.csv's flags against the truth of the sequence `seq` (the bound for flags that
+/// mean something): no frame whose joints all lie within 3 cm of the truth is flagged, and
+/// every frame with a joint over 10 cm off is.
+pub fn assert_flags_follow_truth(dir: &Path, seq: &str) {
+    let rows = hullpose::eval::health_table::read(&dir.join("output")).unwrap();
+    let worst: std::collections::BTreeMap<u32, f64> =
+        output_worst_joint_errors_cm(dir, seq).into_iter().collect();
+    for r in &rows {
+        let w = worst[&r.frame];
+        assert!(
+            w > 3.0 || r.flags.is_empty(),
+            "frame {}: worst joint {w:.2} cm, flagged {}",
+            r.frame,
+            r.flags
+        );
+        assert!(
+            w <= 10.0 || !r.flags.is_empty(),
+            "frame {}: worst joint {w:.2} cm, not flagged",
+            r.frame
+        );
+    }
+}
+
 /// The worst joint error per frame (a bone's head or tail), centimetres, of the run's
 /// `output/joints.csv` in `dir` against the sequence `seq`'s ground truth, in frame order.
 pub fn output_worst_joint_errors_cm(dir: &Path, seq: &str) -> Vec<(u32, f64)> {
