@@ -156,12 +156,12 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
     }
 }
 
-/// The end bone (a bone without children: a hand, a foot, the head) that `pose` swings
-/// farthest from its reference direction relative to its parent, and that swing, degrees:
-/// the angle between the bone's reference direction d and R d, R its rotation relative to
-/// t0 in its parent's posed frame (a turn about the bone's own axis does not count). A hand
-/// folded back onto its forearm swings further than a wrist moves; `None` without end bones.
-pub fn sharpest_end_bend(skeleton: &Skeleton, pose: &Pose) -> Option<(usize, f64)> {
+/// How far `pose` swings its end bones (bones without children: the hands, the feet, the
+/// head) from their reference directions relative to their parents, at most, degrees: for
+/// each, the angle between its reference direction d and R d, R its rotation relative to t0
+/// in its parent's posed frame (a turn about the bone's own axis does not count). A hand
+/// folded back onto its forearm swings further than a wrist moves. 0 without end bones.
+pub fn sharpest_end_bend(skeleton: &Skeleton, pose: &Pose) -> f64 {
     skeleton
         .children()
         .iter()
@@ -170,9 +170,9 @@ pub fn sharpest_end_bend(skeleton: &Skeleton, pose: &Pose) -> Option<(usize, f64
         .map(|(b, _)| {
             let bone = &skeleton.bones[b];
             let d = bone.tail - bone.head;
-            (b, (pose.rotations[b] * d).angle(&d).to_degrees())
+            (pose.rotations[b] * d).angle(&d).to_degrees()
         })
-        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .fold(0.0, f64::max)
 }
 
 /// How many previous frames make a frame's recent silhouette level.

@@ -46,7 +46,7 @@ impl Fitter<'_> {
             return Some("interpenetration");
         }
         let bend = super::health::sharpest_end_bend(&self.model.skeleton, &fit.pose);
-        if bend.is_some_and(|(_, deg)| deg > self.params.health.bend_deg) {
+        if bend > self.params.health.bend_deg {
             return Some("bent_joint");
         }
         let step = self.max_joint_step?;
