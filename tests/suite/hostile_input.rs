@@ -4,7 +4,7 @@
 //! clear errors while the process's peak memory stays under 100 MB (each case runs in a
 //! fresh child process that reports its VmHWM from /proc/self/status).
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;
@@ -213,7 +213,7 @@ fn huge_claims_are_refused_within_100_mb() {
         let out = std::process::Command::new(std::env::current_exe().unwrap())
             .args([
                 "--exact",
-                "hostile_case_child",
+                "hostile_input::hostile_case_child",
                 "--nocapture",
                 "--test-threads",
                 "1",

@@ -2,7 +2,7 @@
 //! at 256x192, 7 frames, up to 46 cm of motion between frames) tracks every frame within
 //! 1 cm of the truth.
 
-mod common;
+use crate::common;
 
 use common::*;
 

@@ -3,7 +3,7 @@
 //! artifact the runner committed for it; a stage asking for an artifact it does not
 //! declare as an input is refused.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::artifacts::reconstruction::Surface;

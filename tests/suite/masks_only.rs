@@ -2,7 +2,7 @@
 //! hull stands as the observed surface, rho_p is 1, and the fit tracks the humanoid, but
 //! for a hand folded back at one frame, which the health flags.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::synth::{SceneKind, SynthOptions};

@@ -8,7 +8,7 @@
 //! nothing upstream of X changed too, and each section's parameters are read by its own
 //! stage and those after it. Frames 0..1 of the bundled sample keep it small.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;

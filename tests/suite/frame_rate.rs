@@ -3,7 +3,7 @@
 //! right (8.33), too high (25, 50: the motion prior's weight grows with f^4) and absent
 //! (the default: the rate is unknown) stays within 1 cm of the truth on every frame.
 
-mod common;
+use crate::common;
 
 use common::*;
 

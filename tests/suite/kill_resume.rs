@@ -2,7 +2,7 @@
 //! fresh run leaves: every output file and every cached artifact, byte for byte (the
 //! manifests aside, which record seconds). Frames 0..2 of the bundled sample keep it small.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! capture seen by the bundled sample's 15 cameras, its masks cast exactly (ray against the
 //! shape); each refusal is one clear message, and nothing is written.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::camera::Camera;

@@ -2,7 +2,7 @@
 //! masks, caching behaviour (reuse, parameter changes, SIGKILL, concurrency, disjoint frame
 //! ranges) and bad pipeline input.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::{Path, PathBuf};

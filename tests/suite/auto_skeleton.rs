@@ -3,7 +3,7 @@
 //! within 7% more) at 12 and 8 cameras, against the generator's true skeleton; tracking
 //! from the automatic skeleton; and the refusals.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::skeleton::Skeleton;

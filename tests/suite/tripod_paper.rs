@@ -2,7 +2,7 @@
 //! once through the whole pipeline: stage 4 (ZNCC tells the true surface from phantom
 //! volume and bridges) and stage 6 (the robust fit and the baselines it is compared with).
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::synth::{SceneKind, SynthOptions};

@@ -2,7 +2,7 @@
 //! true mesh's silhouette through the camera model, projection is OpenCV's formula, and
 //! calibration, skeleton and the whole dataset round-trip.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::camera::{self, Camera};

@@ -1,7 +1,7 @@
 //! Degenerate input does not break the graph cut: a band thicker than the object and
 //! images of one uniform colour give closed meshes and the documented results.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;

@@ -1,7 +1,7 @@
 //! Stage 5: the skin-bone model built at t0 and posed with the true poses reproduces the
 //! true surface of every frame; bad skeletons and surfaces are refused clearly.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::geometry::nearest::NearestTree;

@@ -9,7 +9,7 @@
 //! with `HULLPOSE_EXTERNAL_CHECKS=1` (as CI sets it) a missing checker fails the test,
 //! otherwise it is skipped with a note.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::geometry::axes::{to_y_up, UpAxis};

@@ -1,7 +1,7 @@
 //! The graph-cut refinement: better than the hull where cameras see the surface, the hull's
 //! shape where nothing does (the phantom volume stays), closed meshes, no collapse.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::geometry::grid::GridSpec;

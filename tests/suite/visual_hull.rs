@@ -1,7 +1,7 @@
 //! The visual hull: it never cuts into the object, its meshes are closed oriented
 //! manifolds, and bad input gives clear errors or documented behaviour.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::geometry::TriMesh;

@@ -7,7 +7,7 @@
 //! when a browser or puppeteer-core is missing, and required with `HULLPOSE_EXTERNAL_CHECKS=1`
 //! (as CI sets).
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! byte for byte, and inputs that used to give garbage with exit 0 now refused or warned
 //! about by name, by `pipeline check` before any work.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;

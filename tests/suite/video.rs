@@ -7,7 +7,7 @@
 //! The videos are made with the system's ffmpeg. Without it the tests say so and pass,
 //! unless `HULLPOSE_EXTERNAL_CHECKS=1` (as CI sets it, after installing it).
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;

@@ -4,7 +4,7 @@
 //! (every joint inside the mask, dilated by 5 px, in at least 7 of 8 cameras) and the
 //! body's symmetry (left and right limbs within 10% of each other).
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::skeleton::Skeleton;

@@ -1,7 +1,7 @@
 //! Broken captures give one clear error naming the file and the problem, a non-zero exit,
 //! and no panic.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::synth::{SceneKind, SynthOptions};

@@ -2,7 +2,7 @@
 //! the phantom frames and none at t0, touching arm tips at t9-t10, touching body parts on
 //! the humanoid's contact frames.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::dataset::Sequence;

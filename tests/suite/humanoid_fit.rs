@@ -2,7 +2,7 @@
 //! fit stage within 1.5 cm of the truth on every frame, hands crossing the chest and resting
 //! on a knee included.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::synth::{SceneKind, SynthOptions};

@@ -6,7 +6,7 @@
 //! it; the health checks send the frame to recovery, which fits it again from the
 //! straightened hypothesis. Without the prior and without recovery the hand stays lost.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hullpose::synth::{Motion, SceneKind, SynthOptions};

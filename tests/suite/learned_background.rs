@@ -4,7 +4,7 @@
 //! torsos never moving), measured against the true masks, the true plates and the true
 //! joints; a capture whose pixels never show a steady background is refused by camera.
 
-mod common;
+use crate::common;
 
 use common::*;
 use std::path::Path;

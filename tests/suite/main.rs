@@ -1,0 +1,38 @@
+//! The integration tests, one module per subject, built as one test binary so that one
+//! link serves them all and the harness runs them side by side (`cargo test --test suite
+//! MODULE::` runs one subject). Each module's doc comment says what it checks.
+
+mod common;
+
+mod auto_skeleton;
+mod bad_input;
+mod cache_soundness;
+mod calib_import;
+mod dance_recovery;
+mod dancer;
+mod export;
+mod fit;
+mod frame_rate;
+mod fuzz_parsers;
+mod graphcut;
+mod graphcut_degenerate;
+mod hostile_input;
+mod hostile_round3;
+mod humanoid_fit;
+mod kill_resume;
+mod layers;
+mod learned_background;
+mod masks_only;
+mod model;
+mod parameter_table;
+mod quick_start;
+mod realdata;
+mod report;
+mod runner;
+mod skeleton_refusals;
+mod stage_functions;
+mod synth_data;
+mod synth_scenes;
+mod tripod_paper;
+mod video;
+mod visual_hull;
