@@ -54,8 +54,9 @@ impl Fitter<'_> {
     }
 
     /// Fits `prepared` again from the most promising recovery hypothesis of `best` and
-    /// keeps the lower score; `diagnostics.recovery` names the hypothesis that won (`kept`
-    /// when none did), and the rounds of every start are counted.
+    /// keeps the better of the two ([`judged`]); `diagnostics.recovery` names the
+    /// hypothesis that won (`kept` when none did), and the rounds of every start are
+    /// counted.
     ///
     /// Every hypothesis is screened with [`SCREEN_ROUNDS`] rounds; only the lowest score
     /// goes on to a full fit. On the humanoid's dance the screen's scores after 1 and 3
@@ -66,6 +67,7 @@ impl Fitter<'_> {
         prepared: &Prepared,
         best: FitResult,
         cap: usize,
+        silhouettes: Option<&dyn SilhouetteScore>,
         probe: &Probe,
     ) -> FitResult {
         let mut best = best;
@@ -90,9 +92,64 @@ impl Fitter<'_> {
             r.diagnostics.lm_steps += screened.diagnostics.lm_steps;
             r
         };
-        // `better` counts the rounds of both (the screen's already count every start's).
-        super::tracking::better(best, r)
+        // Both count the rounds of both (the screen's already count every start's).
+        match silhouettes {
+            Some(s) => judged(best, r, s),
+            None => super::tracking::better(best, r),
+        }
     }
+}
+
+/// A frame's silhouettes, as a judge of poses: the worst camera's IoU of the model posed at
+/// `pose` with the frame's masks (the health check's measure, README "Reading the fit's
+/// health"); `None` when the masks cannot be read.
+pub trait SilhouetteScore {
+    fn worst_iou(&self, pose: &Pose) -> Option<f64>;
+}
+
+/// Two fits' worst-camera IoUs must differ by more than this for the silhouettes to decide
+/// between them; closer, the lower score does. Half a percent: on the masks-only humanoid's
+/// folded hand (t13) the straightened fit's IoU is 0.938 against the fold's 0.928.
+pub const SILHOUETTE_MARGIN: f64 = 0.005;
+
+/// Appended to fit.csv's `recovery` when the silhouettes chose against the score: the
+/// observed surface and the masks disagree about the frame, which is flagged `disputed`.
+pub const BY_SILHOUETTES: &str = " by silhouettes";
+
+/// Of the fit kept (`kept`) and the recovered one (`recovered`), the one whose posed model
+/// explains the silhouettes better by more than [`SILHOUETTE_MARGIN`], else the lower score
+/// ([`super::tracking::better`]), with the rounds of both. The score measures the observed
+/// surface, which on a masks-only capture is the hull with its phantom volumes: there a
+/// hand folded into a phantom can score better than the straightened hand the silhouettes
+/// show. When the silhouettes overrule the score, the winner's `recovery` says so
+/// ([`BY_SILHOUETTES`]).
+fn judged(kept: FitResult, recovered: FitResult, silhouettes: &dyn SilhouetteScore) -> FitResult {
+    let ious = (
+        silhouettes.worst_iou(&kept.pose),
+        silhouettes.worst_iou(&recovered.pose),
+    );
+    let winner = match ious {
+        (Some(a), Some(b)) if b > a + SILHOUETTE_MARGIN => Some(true),
+        (Some(a), Some(b)) if a > b + SILHOUETTE_MARGIN => Some(false),
+        _ => None,
+    };
+    let Some(take_recovered) = winner else {
+        return super::tracking::better(kept, recovered);
+    };
+    let (rounds, steps) = (
+        kept.diagnostics.iterations + recovered.diagnostics.iterations,
+        kept.diagnostics.lm_steps + recovered.diagnostics.lm_steps,
+    );
+    let score_prefers_recovered = recovered.diagnostics.score < kept.diagnostics.score;
+    let mut best = if take_recovered { recovered } else { kept };
+    if take_recovered != score_prefers_recovered {
+        if let Some(name) = best.diagnostics.recovery.as_mut() {
+            name.push_str(BY_SILHOUETTES);
+        }
+    }
+    best.diagnostics.iterations = rounds;
+    best.diagnostics.lm_steps = steps;
+    best
 }
 
 /// Rounds each recovery hypothesis is fitted before the most promising one goes on.
@@ -202,6 +259,53 @@ fn mirrored_limbs(skeleton: &Skeleton) -> Vec<MirroredLimb> {
 mod tests {
     use super::*;
     use crate::skeleton::PosedBones;
+
+    /// A judge that knows each pose's IoU by its root's x.
+    struct ByRootX;
+    impl SilhouetteScore for ByRootX {
+        fn worst_iou(&self, pose: &Pose) -> Option<f64> {
+            Some(pose.translation.x)
+        }
+    }
+
+    fn fit_with(iou: f64, score: f64, recovery: &str) -> FitResult {
+        let mut pose = Pose::rest(2);
+        pose.translation.x = iou;
+        let mut diagnostics = FitDiagnostics::unfitted(FitStatus::Converged, 10);
+        (diagnostics.score, diagnostics.iterations) = (score, 3);
+        diagnostics.recovery = Some(recovery.to_string());
+        FitResult { pose, diagnostics }
+    }
+
+    /// The silhouettes decide beyond their margin, and say so when they overrule the
+    /// score; within it the score decides. Either way the rounds of both count.
+    #[test]
+    fn silhouettes_overrule_the_score_beyond_their_margin() {
+        let won = |kept, recovered| {
+            let r = judged(kept, recovered, &ByRootX);
+            (r.diagnostics.recovery.unwrap(), r.diagnostics.iterations)
+        };
+        let overruled = won(
+            fit_with(0.90, 1.0, "kept"),
+            fit_with(0.92, 2.0, "straightened"),
+        );
+        assert_eq!(overruled, ("straightened by silhouettes".to_string(), 6));
+        let agreed = won(
+            fit_with(0.90, 2.0, "kept"),
+            fit_with(0.92, 1.0, "straightened"),
+        );
+        assert_eq!(agreed.0, "straightened");
+        let close = won(
+            fit_with(0.90, 1.0, "kept"),
+            fit_with(0.904, 2.0, "straightened"),
+        );
+        assert_eq!(close.0, "kept");
+        let kept = won(
+            fit_with(0.93, 2.0, "kept"),
+            fit_with(0.90, 1.0, "mirrored thigh"),
+        );
+        assert_eq!(kept.0, "kept by silhouettes");
+    }
 
     #[test]
     fn sides_are_swapped_token_by_token() {

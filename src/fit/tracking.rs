@@ -5,6 +5,7 @@
 
 use super::pairs::prepare;
 use super::probe::Probe;
+use super::recovery::SilhouetteScore;
 use super::{FitDiagnostics, FitResult, FitStatus, Fitter, Observation, Start};
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::{Pose, PosedBones, Skeleton};
@@ -58,6 +59,7 @@ impl<'a> Tracker<'a> {
         frame: u32,
         obs: &Observation,
         neighbours: Option<Neighbours>,
+        silhouettes: Option<&dyn SilhouetteScore>,
         probe: &Probe,
     ) -> FitResult {
         let result = match neighbours {
@@ -73,8 +75,14 @@ impl<'a> Tracker<'a> {
                     fit.energy = fit.energy.max(before.energy);
                 }
                 let before = before.map(|x| &x.0);
-                self.fitter
-                    .fit_tracked(obs, start, before, previous_fit.as_ref(), probe)
+                self.fitter.fit_tracked(
+                    obs,
+                    start,
+                    before,
+                    previous_fit.as_ref(),
+                    silhouettes,
+                    probe,
+                )
             }
         };
 
@@ -123,6 +131,7 @@ impl Fitter<'_> {
         previous: &Pose,
         before: Option<&Pose>,
         previous_fit: Option<&FitDiagnostics>,
+        silhouettes: Option<&dyn SilhouetteScore>,
         probe: &Probe,
     ) -> FitResult {
         let p = &self.params;
@@ -151,7 +160,7 @@ impl Fitter<'_> {
         }
         if !self.lost(&best, &first, previous, previous_fit) {
             let best = self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
-            return self.recovered(&prepared, best, previous, cap, probe);
+            return self.recovered(&prepared, best, previous, cap, silhouettes, probe);
         }
         let mut rest = Pose::rest(previous.rotations.len());
         rest.translation = previous.translation;
@@ -168,7 +177,7 @@ impl Fitter<'_> {
             best = better(best, r);
         }
         let best = self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
-        self.recovered(&prepared, best, previous, cap, probe)
+        self.recovered(&prepared, best, previous, cap, silhouettes, probe)
     }
 
     /// `best`, or its recovery ([`super::recovery`]) when it needs one.
@@ -178,10 +187,11 @@ impl Fitter<'_> {
         best: FitResult,
         previous: &Pose,
         cap: usize,
+        silhouettes: Option<&dyn SilhouetteScore>,
         probe: &Probe,
     ) -> FitResult {
         match self.needs_recovery(&best, previous) {
-            Some(_) => self.recover(prepared, best, cap, probe),
+            Some(_) => self.recover(prepared, best, cap, silhouettes, probe),
             None => best,
         }
     }

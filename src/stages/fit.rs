@@ -15,9 +15,11 @@ use crate::error::{Error, Result};
 use crate::fit::{
     FitDiagnostics, FitResult, FitStatus, Fitter, Neighbours, Observation, Probe, Tracker,
 };
+use crate::geometry::TriMesh;
 use crate::joints::JointRow;
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::{Pose, Skeleton};
+use nalgebra::Vector3;
 use serde::Serialize;
 use std::path::Path;
 
@@ -123,6 +125,7 @@ fn track(
     inputs: &Inputs,
     settings: &Settings,
     model: &BodyModel,
+    checks: &HealthChecks,
     frames: &[u32],
     probe: &Probe,
     done: &mut dyn FnMut(u32, &FitResult, &Observation, f64) -> Result<()>,
@@ -161,7 +164,16 @@ fn track(
         };
         let obs = observation(inputs, frame)?;
         let started = std::time::Instant::now();
-        let result = tracker.fit(frame, &obs, neighbours, probe);
+        let judge = Silhouettes {
+            inputs,
+            model,
+            checks,
+            frame,
+            observed: &obs.vertices,
+            reach: params.health.surface_reach,
+            masks: std::cell::OnceCell::new(),
+        };
+        let result = tracker.fit(frame, &obs, neighbours, Some(&judge), probe);
         done(frame, &result, &obs, started.elapsed().as_secs_f64())?;
     }
     Ok(())
@@ -182,6 +194,7 @@ pub fn track_in_memory(
         ..resolve(ctx.config, ctx.sequence)?
     };
     let model = inputs.body_model()?;
+    let checks = HealthChecks::new(&model);
     let probe = Probe::default();
     let mut out = Vec::with_capacity(frames.len());
     let mut seconds = Vec::with_capacity(frames.len());
@@ -190,6 +203,7 @@ pub fn track_in_memory(
         &inputs,
         &settings,
         &model,
+        &checks,
         frames,
         &probe,
         &mut |frame, result, _, secs| {
@@ -229,10 +243,7 @@ pub struct Tracked {
 fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> Result<()> {
     let model = inputs.body_model()?;
     let probe = Probe::default();
-    let checks = HealthChecks {
-        coarse: crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL),
-        capsules: crate::fit::interpenetration::Capsules::new(&model),
-    };
+    let checks = HealthChecks::new(&model);
     // The states of the frames fitted in this run (earlier frames are read from the cache):
     // a frame's health is judged against its previous tracked frames, wherever they were
     // computed, so a resumed run flags what a fresh one flags.
@@ -243,6 +254,7 @@ fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> 
         inputs,
         settings,
         &model,
+        &checks,
         frames,
         &probe,
         &mut |frame, result, obs, secs| {
@@ -317,6 +329,48 @@ struct HealthChecks {
     capsules: crate::fit::interpenetration::Capsules,
 }
 
+impl HealthChecks {
+    fn new(model: &BodyModel) -> HealthChecks {
+        HealthChecks {
+            coarse: crate::fit::health::CoarseModel::new(&model.mesh, HEALTH_CELL),
+            capsules: crate::fit::interpenetration::Capsules::new(model),
+        }
+    }
+
+    /// The posed model `mesh`, coarse, and moved onto the frame's `observed` surface where
+    /// that lies within `reach` metres: what the silhouettes are compared with.
+    fn measured(&self, mesh: &TriMesh, observed: &[Vector3<f64>], reach: f64) -> TriMesh {
+        crate::fit::surface_layer::follow(&self.coarse.posed(mesh), observed, reach)
+    }
+}
+
+/// One frame's silhouettes as the judge of recovery's fits ([`crate::fit::SilhouetteScore`]),
+/// with the health check's measure; the masks are read when first needed.
+struct Silhouettes<'a> {
+    inputs: &'a Inputs<'a>,
+    model: &'a BodyModel,
+    checks: &'a HealthChecks,
+    frame: u32,
+    observed: &'a [Vector3<f64>],
+    /// `fit.health.surface_reach`, metres.
+    reach: f64,
+    masks: std::cell::OnceCell<Option<Vec<image::GrayImage>>>,
+}
+
+impl crate::fit::SilhouetteScore for Silhouettes<'_> {
+    fn worst_iou(&self, pose: &Pose) -> Option<f64> {
+        let masks = self
+            .masks
+            .get_or_init(|| self.inputs.silhouettes(self.frame).ok())
+            .as_ref()?;
+        let mesh = self
+            .checks
+            .measured(&self.model.pose(pose), self.observed, self.reach);
+        let iou = crate::fit::health::silhouette_iou(&self.inputs.sequence.cameras, masks, &mesh);
+        Some(crate::fit::health::summarize(&iou, 0.0).iou_worst)
+    }
+}
+
 /// A frame's artifact with the frame's state; `recent` holds the worst silhouette IoU of
 /// the previous tracked frames (oldest first; its health checks compare against them),
 /// `reference_iou` the reference frame's, `previous_pose` the previous tracked frame's pose
@@ -340,17 +394,18 @@ fn fitted_frame(
     let poses_csv = crate::poses::to_csv(skeleton, &[(frame, result.pose.clone())]);
     let joints_csv = crate::joints::to_csv(&joint_rows(skeleton, frame, &result.pose));
     let mesh = model.pose(&result.pose);
-    let measured = crate::fit::surface_layer::follow(
-        &checks.coarse.posed(&mesh),
-        &observed.vertices,
-        settings.fit.health.surface_reach,
-    );
+    let measured = checks.measured(&mesh, &observed.vertices, settings.fit.health.surface_reach);
     let mut health = frame_health(inputs, model, frame, &result.pose, previous_pose, &measured)?;
     health.interpenetration = checks
         .capsules
         .deepest(model, &result.pose)
         .map_or(0.0, |x| x.2);
     health.end_bend_deg = crate::fit::health::sharpest_end_bend(skeleton, &result.pose);
+    health.disputed = result
+        .diagnostics
+        .recovery
+        .as_deref()
+        .is_some_and(|r| r.ends_with(crate::fit::BY_SILHOUETTES));
     health.energy_ratio = previous_energy
         .filter(|&e| e > 0.0)
         .map_or(0.0, |e| result.diagnostics.energy / e);

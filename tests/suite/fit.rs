@@ -173,11 +173,11 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
     let capped = capped_at(2, 2);
     let obs = observe(&mesh(dir.path(), 1));
     let reference = Pose::rest(skeleton.bones.len());
-    let r = capped.fit_tracked(&obs, &reference, None, None, &probe);
+    let r = capped.fit_tracked(&obs, &reference, None, None, None, &probe);
     assert_eq!(r.diagnostics.status, FitStatus::IterationCap);
     assert_eq!(r.diagnostics.iterations, 2);
     let obs = observe(&mesh(dir.path(), 6));
-    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None, &probe);
+    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None, None, &probe);
     assert_eq!(r.diagnostics.iterations, 2 + 4 + 4);
     let previous_fit = |score: f64| FitDiagnostics {
         score,
@@ -189,16 +189,24 @@ fn exact_observations_give_the_true_pose_and_bad_ones_keep_the_previous() {
         &poses[5].1,
         Some(&poses[4].1),
         Some(&far_lower),
+        None,
         &probe,
     );
     assert_eq!(r.diagnostics.iterations, 2 + 4 + 4);
     // A capped fit whose score did not rise above the previous frame's is kept as it is.
     let higher = previous_fit(r.diagnostics.score * 100.0);
-    let r = capped.fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), Some(&higher), &probe);
+    let r = capped.fit_tracked(
+        &obs,
+        &poses[5].1,
+        Some(&poses[4].1),
+        Some(&higher),
+        None,
+        &probe,
+    );
     assert_eq!(r.diagnostics.iterations, 2);
     // Restarts have a cap of their own (`restart.rounds_factor` times the cap); from these
     // starts they may converge before it.
-    let r = capped_at(2, 3).fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None, &probe);
+    let r = capped_at(2, 3).fit_tracked(&obs, &poses[5].1, Some(&poses[4].1), None, None, &probe);
     let rounds = r.diagnostics.iterations;
     assert!(rounds > 2 + 2 && rounds <= 2 + 6 + 6, "{rounds} rounds");
 }

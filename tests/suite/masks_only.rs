@@ -1,6 +1,7 @@
 //! A capture of silhouettes only (masks/, no frames/ and no plates) runs end to end: the
 //! hull stands as the observed surface, rho_p is 1, and the fit tracks the humanoid, but
-//! for a hand folded back at one frame, which the health flags.
+//! for a hand folded back at one frame, which recovery straightens only partly and the
+//! health flags.
 
 use crate::common;
 
@@ -8,7 +9,7 @@ use common::*;
 use hullpose::synth::{SceneKind, SynthOptions};
 
 #[test]
-fn a_masks_only_humanoid_is_tracked_within_two_and_a_half_centimetres() {
+fn a_masks_only_humanoid_is_tracked_within_two_centimetres() {
     let dir = process_tempdir();
     let d = dir.path();
     let mut options = SynthOptions::new(SceneKind::Humanoid, d);
@@ -51,10 +52,17 @@ fn a_masks_only_humanoid_is_tracked_within_two_and_a_half_centimetres() {
     let errors = output_joint_errors_cm(d, "humanoid");
     eprintln!("masks only, joint error per frame (cm): {errors:.2?}");
     assert_eq!(errors.len(), 16);
-    assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
-    // Frame 13's right hand folds back onto its forearm (29 cm off; recovery keeps it):
-    // flagged `bent_joint`, and no good frame is.
+    assert!(errors.iter().all(|&e| e <= 2.0), "{errors:.2?}");
+    // Frame 13's right hand folds back onto its forearm (29 cm off), which the hull's
+    // phantom scores better than the straightened hand; the silhouettes prefer the
+    // straightened fit (12 cm off): flagged `disputed`, and no good frame is.
     assert_flags_follow_truth(d, "humanoid");
+    let rows = hullpose::eval::health_table::read(&d.join("output")).unwrap();
+    let t13 = rows.iter().find(|r| r.frame == 13).unwrap();
+    assert_eq!(
+        (t13.recovery.as_str(), t13.flags.as_str()),
+        ("straightened by silhouettes", "disputed")
+    );
     // The exports draw on the masks in place of frames.
     assert!(d
         .join("output/export/overlays/contact/000005.png")
