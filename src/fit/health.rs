@@ -40,9 +40,6 @@ pub struct Health {
     pub end_bend_deg: f64,
     /// Eq. 4 against the previous tracked frame's (0: unknown).
     pub energy_ratio: f64,
-    /// Whether recovery's pick was the silhouettes' against the surface's score
-    /// ([`crate::fit::BY_SILHOUETTES`]): the evidence disagrees about the frame.
-    pub disputed: bool,
 }
 
 /// The body model's mesh coarsened for the silhouette check (vertex clustering on a grid of
@@ -156,7 +153,6 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
         interpenetration: 0.0,
         end_bend_deg: 0.0,
         energy_ratio: 0.0,
-        disputed: false,
     }
 }
 
@@ -221,9 +217,6 @@ pub fn flags(
     }
     if h.energy_ratio > p.energy_jump {
         out.push("energy_jump");
-    }
-    if h.disputed {
-        out.push("disputed");
     }
     out
 }

@@ -37,7 +37,7 @@ pub use descent::POINT_SHARE;
 pub use pairs::{thin, COMPATIBLE_SEARCH_LIMIT};
 pub use params::{validate, FitParams, HealthParams, Method, RestartParams, Start, StopParams};
 pub use probe::{Probe, RoundKind, RoundRecord, STEP_PART_PREFIX};
-pub use recovery::{unexplained_cm2, SilhouetteScore, BY_SILHOUETTES};
+pub use recovery::{unexplained_cm2, SilhouetteScore};
 pub use result::{FitDiagnostics, FitResult, FitStatus, Observation, Unexplained};
 pub use tracking::{joint_motion, Neighbours, Tracker};
 

@@ -191,7 +191,7 @@ impl Fitter<'_> {
         probe: &Probe,
     ) -> FitResult {
         match self.needs_recovery(&best, previous) {
-            Some(_) => self.recover(prepared, best, cap, silhouettes, probe),
+            Some(_) => self.recover(prepared, best, previous, cap, silhouettes, probe),
             None => best,
         }
     }

@@ -401,11 +401,6 @@ fn fitted_frame(
         .deepest(model, &result.pose)
         .map_or(0.0, |x| x.2);
     health.end_bend_deg = crate::fit::health::sharpest_end_bend(skeleton, &result.pose);
-    health.disputed = result
-        .diagnostics
-        .recovery
-        .as_deref()
-        .is_some_and(|r| r.ends_with(crate::fit::BY_SILHOUETTES));
     health.energy_ratio = previous_energy
         .filter(|&e| e > 0.0)
         .map_or(0.0, |e| result.diagnostics.energy / e);
