@@ -143,19 +143,13 @@ fn judged(kept: FitResult, recovered: FitResult, silhouettes: &dyn SilhouetteSco
     let Some(take_recovered) = winner else {
         return super::tracking::better(kept, recovered);
     };
-    let (rounds, steps) = (
-        kept.diagnostics.iterations + recovered.diagnostics.iterations,
-        kept.diagnostics.lm_steps + recovered.diagnostics.lm_steps,
-    );
     let score_prefers_recovered = recovered.diagnostics.score < kept.diagnostics.score;
-    let mut best = if take_recovered { recovered } else { kept };
+    let mut best = super::tracking::pick(kept, recovered, take_recovered);
     if take_recovered != score_prefers_recovered {
         if let Some(name) = best.diagnostics.recovery.as_mut() {
             name.push_str(BY_SILHOUETTES);
         }
     }
-    best.diagnostics.iterations = rounds;
-    best.diagnostics.lm_steps = steps;
     best
 }
 

@@ -309,15 +309,17 @@ fn largest_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
 /// The fit with the lower score ([`FitDiagnostics::score`]), with the rounds and steps of
 /// both.
 pub(super) fn better(a: FitResult, b: FitResult) -> FitResult {
+    let take_b = b.diagnostics.score < a.diagnostics.score;
+    pick(a, b, take_b)
+}
+
+/// `b` when `take_b`, else `a`, with the rounds and steps of both.
+pub(super) fn pick(a: FitResult, b: FitResult, take_b: bool) -> FitResult {
     let (rounds, steps) = (
         a.diagnostics.iterations + b.diagnostics.iterations,
         a.diagnostics.lm_steps + b.diagnostics.lm_steps,
     );
-    let mut best = if b.diagnostics.score < a.diagnostics.score {
-        b
-    } else {
-        a
-    };
+    let mut best = if take_b { b } else { a };
     best.diagnostics.iterations = rounds;
     best.diagnostics.lm_steps = steps;
     best
