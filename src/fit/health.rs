@@ -9,8 +9,10 @@
 
 use crate::camera::Camera;
 use crate::geometry::TriMesh;
-use crate::skeleton::{Pose, Skeleton};
+use crate::skeleton::sides::{is_left, other_side};
+use crate::skeleton::{Pose, PosedBones, Skeleton};
 use image::GrayImage;
+use nalgebra::Vector3;
 use rayon::prelude::*;
 
 /// Width of the reduced images the agreement is measured on, pixels (at most).
@@ -38,6 +40,9 @@ pub struct Health {
     /// The sharpest swing of an end bone from its reference direction relative to its
     /// parent, degrees ([`sharpest_end_bend`]).
     pub end_bend_deg: f64,
+    /// How far the hips turned from the shoulders about the trunk since the reference
+    /// pose, degrees ([`trunk_twist_deg`]).
+    pub trunk_twist_deg: f64,
     /// Eq. 4 against the previous tracked frame's (0: unknown).
     pub energy_ratio: f64,
 }
@@ -152,6 +157,7 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
         unexplained_cm2: None,
         interpenetration: 0.0,
         end_bend_deg: 0.0,
+        trunk_twist_deg: 0.0,
         energy_ratio: 0.0,
     }
 }
@@ -175,6 +181,52 @@ pub fn sharpest_end_bend(skeleton: &Skeleton, pose: &Pose) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// How far the hips' axis (left hip minus right: the heads of the root's left/right pair
+/// of children) turned against the shoulders' (the heads of another bone's left/right
+/// pair) about the trunk (from the hips' middle to the shoulders') between the reference
+/// pose and `pose`, degrees in [0, 180]; 0 for a skeleton without both pairs. A trunk
+/// turns about 45 degrees each way: far beyond that, the pelvis the fit holds faces another
+/// way than the body (a dress leaves the hips free to turn).
+pub fn trunk_twist_deg(skeleton: &Skeleton, pose: &Pose) -> f64 {
+    let names = &skeleton.bones;
+    let children = skeleton.children();
+    let pair = |bones: &[usize]| {
+        let left = bones.iter().copied().find(|&b| is_left(&names[b].name))?;
+        let mirror = other_side(&names[left].name)?;
+        let right = bones.iter().copied().find(|&b| names[b].name == mirror)?;
+        Some((left, right))
+    };
+    let Some(root) = names.iter().position(|b| b.parent.is_none()) else {
+        return 0.0;
+    };
+    let Some(hips) = pair(&children[root]) else {
+        return 0.0;
+    };
+    let Some(shoulders) = (0..names.len())
+        .filter(|&b| b != root && !is_left(&names[b].name))
+        .find_map(|b| pair(&children[b]))
+    else {
+        return 0.0;
+    };
+    let twist = |pose: &Pose| -> Option<f64> {
+        let bones = PosedBones::new(skeleton, pose);
+        let (hl, hr) = (bones.heads[hips.0], bones.heads[hips.1]);
+        let (sl, sr) = (bones.heads[shoulders.0], bones.heads[shoulders.1]);
+        let axis = (0.5 * (sl + sr) - 0.5 * (hl + hr)).try_normalize(1e-9)?;
+        let across = |v: Vector3<f64>| v - axis * v.dot(&axis);
+        let (h, s) = (across(hl - hr), across(sl - sr));
+        Some(h.cross(&s).dot(&axis).atan2(h.dot(&s)))
+    };
+    let rest = Pose::rest(names.len());
+    match (twist(pose), twist(&rest)) {
+        (Some(now), Some(then)) => {
+            let d = (now - then).rem_euclid(std::f64::consts::TAU);
+            d.min(std::f64::consts::TAU - d).to_degrees()
+        }
+        _ => 0.0,
+    }
+}
+
 /// How many previous frames make a frame's recent silhouette level.
 pub const RECENT_FRAMES: usize = 5;
 
@@ -186,7 +238,8 @@ pub const RECENT_FRAMES: usize = 5;
 /// `reference` (the reference frame's worst IoU; none at the reference frame), `unexplained` when the fit left at least
 /// `p.unexplained_cm2` of reliable observed surface unexplained, `interpenetration` when two
 /// parts overlap deeper than `p.interpenetration_cm`, `bent_joint` when an end bone swung
-/// more than `p.bend_deg` from its reference direction, `energy_jump` when eq. 4 rose more
+/// more than `p.bend_deg` from its reference direction, `twisted_trunk` when the hips
+/// turned more than `p.twist_deg` from the shoulders, `energy_jump` when eq. 4 rose more
 /// than `p.energy_jump` times the previous frame's.
 pub fn flags(
     h: &Health,
@@ -214,6 +267,9 @@ pub fn flags(
     }
     if h.end_bend_deg > p.bend_deg {
         out.push("bent_joint");
+    }
+    if h.trunk_twist_deg > p.twist_deg {
+        out.push("twisted_trunk");
     }
     if h.energy_ratio > p.energy_jump {
         out.push("energy_jump");
@@ -279,6 +335,7 @@ mod tests {
         lost.unexplained_cm2 = Some(12.0);
         lost.interpenetration = 0.08;
         lost.end_bend_deg = 150.0;
+        lost.trunk_twist_deg = 100.0;
         lost.energy_ratio = 12.0;
         assert_eq!(
             flags(&lost, &[0.96], Some(0.96), &p, Some(25.0)),
@@ -289,6 +346,7 @@ mod tests {
                 "unexplained",
                 "interpenetration",
                 "bent_joint",
+                "twisted_trunk",
                 "energy_jump"
             ]
         );
@@ -298,6 +356,7 @@ mod tests {
                 "unexplained",
                 "interpenetration",
                 "bent_joint",
+                "twisted_trunk",
                 "energy_jump"
             ]
         );
@@ -308,6 +367,7 @@ mod tests {
                 "unexplained",
                 "interpenetration",
                 "bent_joint",
+                "twisted_trunk",
                 "energy_jump"
             ]
         );
@@ -320,5 +380,31 @@ mod tests {
         let h = summarize(&[0.9, 0.5, 0.8, 0.95], 0.02);
         assert_eq!((h.iou_worst, h.iou_worst_camera), (0.5, 1));
         assert!((h.iou_median - 0.85).abs() < 1e-12);
+    }
+
+    /// The humanoid's hips turned against its shoulders by the pelvis (the root, which
+    /// carries the whole body) measure nothing; turned by the spine (the upper body alone)
+    /// they measure the turn, whichever way, up to 180 degrees.
+    #[test]
+    fn trunk_twist_is_the_hips_turn_against_the_shoulders() {
+        let skeleton = crate::synth::humanoid::skeleton();
+        let bone = |name: &str| skeleton.bone_index(name).expect("humanoid bone");
+        let turned = |b: usize, deg: f64| {
+            let mut pose = Pose::rest(skeleton.bones.len());
+            pose.rotations[b] =
+                nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), deg.to_radians());
+            pose
+        };
+        assert!(trunk_twist_deg(&skeleton, &Pose::rest(skeleton.bones.len())) < 1e-9);
+        assert!(trunk_twist_deg(&skeleton, &turned(bone("pelvis"), 150.0)) < 1e-6);
+        for (deg, expect) in [
+            (30.0, 30.0),
+            (-100.0, 100.0),
+            (170.0, 170.0),
+            (200.0, 160.0),
+        ] {
+            let twist = trunk_twist_deg(&skeleton, &turned(bone("spine"), deg));
+            assert!((twist - expect).abs() < 1e-6, "{deg}: {twist}");
+        }
     }
 }

@@ -208,6 +208,11 @@ pub struct HealthParams {
     /// a wrist or an ankle moves within about 90 degrees; the dance's right hand folded back
     /// onto its forearm swings 146-163 (BENCHMARKS.md has the real dancer's).
     pub bend_deg: f64,
+    /// A frame is flagged `twisted_trunk` when the hips turned more than this from the
+    /// shoulders about the trunk since the reference pose
+    /// ([`super::health::trunk_twist_deg`]), degrees. Default 90: a trunk turns about 45
+    /// each way. Only flagged: recovery's hypotheses do not turn the pelvis.
+    pub twist_deg: f64,
     /// A frame is flagged when its eq. 4 energy is more than this times the larger of the
     /// two previous tracked frames'. Default 10 (on a masks-only capture, where the hull's
     /// phantom volumes are observed surface, eq. 4 varies by 3x between good frames).
@@ -224,6 +229,7 @@ impl Default for HealthParams {
             surface_reach: 0.05,
             interpenetration_cm: 6.0,
             bend_deg: 120.0,
+            twist_deg: 90.0,
             energy_jump: 10.0,
         }
     }
@@ -349,6 +355,13 @@ pub fn validate(p: &FitParams) -> std::result::Result<(), Refusal> {
         return Err(format!(
             "fit.health.bend_deg must be an angle in (0, 180] degrees (default 120), got {}",
             h.bend_deg
+        )
+        .into());
+    }
+    if !(h.twist_deg > 0.0 && h.twist_deg <= 180.0) {
+        return Err(format!(
+            "fit.health.twist_deg must be an angle in (0, 180] degrees (default 90), got {}",
+            h.twist_deg
         )
         .into());
     }

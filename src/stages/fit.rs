@@ -401,6 +401,7 @@ fn fitted_frame(
         .deepest(model, &result.pose)
         .map_or(0.0, |x| x.2);
     health.end_bend_deg = crate::fit::health::sharpest_end_bend(skeleton, &result.pose);
+    health.trunk_twist_deg = crate::fit::health::trunk_twist_deg(skeleton, &result.pose);
     health.energy_ratio = previous_energy
         .filter(|&e| e > 0.0)
         .map_or(0.0, |e| result.diagnostics.energy / e);
