@@ -153,6 +153,7 @@ const CHANGED: &[(&str, &str)] = &[
     ("fit.contact.rule", "adjacent"),
     ("fit.contact.tau_c", "0.03"),
     ("fit.health.bend_deg", "100"),
+    ("fit.health.twist_deg", "60"),
     ("fit.health.energy_jump", "8"),
     ("fit.health.interpenetration_cm", "5"),
     ("fit.health.iou_drift", "0.8"),
