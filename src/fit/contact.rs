@@ -302,21 +302,25 @@ impl ContactSearch {
     fn renew(&self, c: &mut PartnerLists, ids: &[u32], posed: &[Vector3<f64>], keys: &[[f32; 3]]) {
         let parts = self.posed_parts(posed);
         let nb = self.parts.len();
-        let built: Vec<(Vec<f32>, Vec<u32>)> = ids
-            .par_iter()
-            .map(|&v| {
+        // Each new list's allowances in one block (one row per vertex of `ids`), and one
+        // scratch buffer per worker for the candidates.
+        let mut allowances = vec![0f32; ids.len() * nb];
+        let built: Vec<Vec<u32>> = allowances
+            .par_chunks_mut(nb.max(1))
+            .zip(ids.par_iter())
+            .map_init(Vec::new, |found, (allowance, &v)| {
                 let v = v as usize;
                 // The old list's nearest partner now bounds how far the nearest one lies.
                 let bound = nearest_listed(&c.lists[v], keys, v).0.sqrt();
-                self.partner_list(&parts, posed, v, bound)
+                self.partner_list(&parts, posed, v, bound, allowance, found)
             })
             .collect();
         let epoch = c.epochs.len() as u8;
         c.epochs.push(posed.to_vec());
-        for (&v, (allowance, list)) in ids.iter().zip(built) {
+        for ((&v, list), allowance) in ids.iter().zip(built).zip(allowances.chunks(nb.max(1))) {
             let v = v as usize;
             c.epoch_of[v] = epoch;
-            c.allowance[v * nb..(v + 1) * nb].copy_from_slice(&allowance);
+            c.allowance[v * nb..(v + 1) * nb].copy_from_slice(allowance);
             c.lists[v] = list;
         }
         // Drop the epochs no list refers to and renumber the rest.
@@ -355,16 +359,19 @@ impl ContactSearch {
         PosedParts { trees, boxes }
     }
 
-    /// Vertex v's allowances (one per part, see [`PartnerLists::allowance`]) and list at
-    /// `posed`: the allowed vertices within min(nearest + 2 m, cut-off + m). `bound`: a distance the nearest allowed vertex is
-    /// known to lie within, metres (infinity when none is known).
+    /// Vertex v's list at `posed`: the allowed vertices within min(nearest + 2 m, cut-off +
+    /// m); its allowances (one per part, see [`PartnerLists::allowance`]) are written into
+    /// `allowance`. `bound`: a distance the nearest allowed vertex is known to lie within,
+    /// metres (infinity when none is known). `found`: scratch space for the candidates.
     fn partner_list(
         &self,
         parts: &PosedParts,
         posed: &[Vector3<f64>],
         v: usize,
         bound: f64,
-    ) -> (Vec<f32>, Vec<u32>) {
+        allowance: &mut [f32],
+        found: &mut Vec<(u32, f64)>,
+    ) -> Vec<u32> {
         let m = PARTNER_MARGIN;
         let q = &posed[v];
         let rest_d2 = self.params.rest_distance.powi(2);
@@ -374,8 +381,8 @@ impl ContactSearch {
         // Only vertices within the nearest's distance + 2 m are listed: with an upper bound
         // on that distance, nothing farther needs visiting.
         let search = slack((bound + 2.0 * m).min(reach));
-        let mut allowance = vec![f32::INFINITY; parts.trees.len()];
-        let mut found: Vec<(u32, f64)> = Vec::new();
+        allowance.fill(f32::INFINITY);
+        found.clear();
         for (b, tree) in parts.trees.iter().enumerate() {
             if !self.searched[self.labels[v]][b] {
                 continue;
@@ -407,13 +414,13 @@ impl ContactSearch {
             .sqrt();
         let r = slack((nearest + 2.0 * m).min(reach));
         let mut list: Vec<u32> = found
-            .into_iter()
-            .filter(|&(_, d2)| d2 <= r * r)
-            .map(|(w, _)| w)
+            .iter()
+            .filter(|&&(_, d2)| d2 <= r * r)
+            .map(|&(w, _)| w)
             .collect();
         // In memory order, for the scans.
         list.sort_unstable();
-        (allowance, list)
+        list
     }
 }
 
