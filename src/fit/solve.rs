@@ -173,17 +173,23 @@ impl<'a> HeldProblem<'a> {
 
     /// sum w (n . (y - point))^2 over the planes, m^2.
     fn plane_energy(&self, bones: &PosedBones) -> f64 {
-        let blended: f64 = self
+        // Fixed chunks summed in order, as in `energy`.
+        let partial: Vec<f64> = self
             .plane_blended
-            .iter()
-            .map(|&i| {
-                let q = self.targets.planes[i as usize];
-                let v = q.vertex as usize;
-                let y = pose_vertex(bones, &self.rest[v], &self.weights[v]);
-                q.weight * q.normal.dot(&(y - q.point)).powi(2)
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                chunk
+                    .iter()
+                    .map(|&i| {
+                        let q = self.targets.planes[i as usize];
+                        let v = q.vertex as usize;
+                        let y = pose_vertex(bones, &self.rest[v], &self.weights[v]);
+                        q.weight * q.normal.dot(&(y - q.point)).powi(2)
+                    })
+                    .sum::<f64>()
             })
-            .sum();
-        blended
+            .collect();
+        partial.iter().sum::<f64>()
             + self
                 .plane_rigid
                 .iter()
@@ -214,28 +220,53 @@ impl<'a> HeldProblem<'a> {
     /// `g`; returns their energy.
     fn add_plane_equations(&self, bones: &PosedBones, h: &mut [f64], g: &mut [f64]) -> f64 {
         let n = g.len();
-        let mut e = 0.0;
-        let mut blocks = Vec::new();
-        let mut cols: Vec<(usize, f64)> = Vec::new();
-        for &i in &self.plane_blended {
-            let q = self.targets.planes[i as usize];
-            let v = q.vertex as usize;
-            let y = sparse_vertex_jacobian(bones, &self.rest[v], &self.weights[v], &mut blocks);
-            let r = q.normal.dot(&(y - q.point));
-            e += q.weight * r * r;
-            // The residual's derivative along each column: n . column.
-            cols.clear();
-            cols.extend((0..3).map(|k| (k, q.normal[k])));
-            for (b, c3) in &blocks {
-                for (k, col) in c3.iter().enumerate() {
-                    cols.push((3 + 3 * b + k, q.normal.dot(col)));
-                }
-            }
-            for &(pi, ai) in &cols {
-                g[pi] += q.weight * ai * r;
-                for &(pj, aj) in &cols {
-                    h[pi * n + pj] += q.weight * ai * aj;
-                }
+        let zero = || Accumulator::new(n);
+        // Per fixed chunk, then summed in order (deterministic, see `energy`); each pair
+        // of columns once, as in `point_equations`.
+        let partials: Vec<Accumulator> = self
+            .plane_blended
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                chunk.iter().fold(zero(), |mut acc, &i| {
+                    let q = self.targets.planes[i as usize];
+                    let v = q.vertex as usize;
+                    let y = sparse_vertex_jacobian(
+                        bones,
+                        &self.rest[v],
+                        &self.weights[v],
+                        &mut acc.blocks,
+                    );
+                    let r = q.normal.dot(&(y - q.point));
+                    acc.e += q.weight * r * r;
+                    // The residual's derivative along each column: n . column.
+                    acc.scalar_cols.clear();
+                    acc.scalar_cols.extend((0..3).map(|k| (k, q.normal[k])));
+                    for (b, c3) in &acc.blocks {
+                        for (k, col) in c3.iter().enumerate() {
+                            acc.scalar_cols.push((3 + 3 * b + k, q.normal.dot(col)));
+                        }
+                    }
+                    for (a, &(pi, ai)) in acc.scalar_cols.iter().enumerate() {
+                        acc.g[pi] += q.weight * ai * r;
+                        let wa = q.weight * ai;
+                        for &(pj, aj) in &acc.scalar_cols[a..] {
+                            acc.h[pi * n + pj] += wa * aj;
+                        }
+                    }
+                    acc
+                })
+            })
+            .collect();
+        let total = partials.into_iter().fold(zero(), Accumulator::add);
+        let mut e = total.e;
+        g.iter_mut().zip(&total.g).for_each(|(x, y)| *x += y);
+        // Both triangles from the one summed (see `point_equations`).
+        for i in 0..n {
+            h[i * n + i] += total.h[i * n + i];
+            for j in (i + 1)..n {
+                let s = total.h[i * n + j] + total.h[j * n + i];
+                h[i * n + j] += s;
+                h[j * n + i] += s;
             }
         }
         for m in &self.plane_rigid {
@@ -248,13 +279,7 @@ impl<'a> HeldProblem<'a> {
     /// The point-to-point Gauss-Newton system at `bones`: H = sum W J^T J, g = sum W J^T r,
     /// and the energy; blended vertices summed one by one, the rigid ones in closed form.
     fn point_equations(&self, bones: &PosedBones, n: usize) -> (DMatrix<f64>, DVector<f64>, f64) {
-        let zero = || Accumulator {
-            h: vec![0.0; n * n],
-            g: vec![0.0; n],
-            e: 0.0,
-            blocks: Vec::new(),
-            cols: Vec::new(),
-        };
+        let zero = || Accumulator::new(n);
         // Per fixed chunk, then summed in order (deterministic, see `energy`).
         let partials: Vec<Accumulator> = self
             .blended
@@ -302,12 +327,7 @@ impl<'a> HeldProblem<'a> {
             mut g,
             mut e,
             ..
-        } = partials.into_iter().fold(zero(), |mut a, b| {
-            a.h.iter_mut().zip(&b.h).for_each(|(x, y)| *x += y);
-            a.g.iter_mut().zip(&b.g).for_each(|(x, y)| *x += y);
-            a.e += b.e;
-            a
-        });
+        } = partials.into_iter().fold(zero(), Accumulator::add);
         // Only one triangle of each pair (i, j) was summed, in the order the columns came;
         // fold both triangles into a symmetric matrix.
         let mut hm = DMatrix::from_row_slice(n, n, &h);
@@ -336,7 +356,31 @@ struct Accumulator {
     g: Vec<f64>,
     e: f64,
     blocks: Vec<(usize, [Vector3<f64>; 3])>,
+    /// A pull's Jacobian columns (3-vectors), by parameter.
     cols: Vec<(usize, Vector3<f64>)>,
+    /// A plane's Jacobian row (scalars), by parameter.
+    scalar_cols: Vec<(usize, f64)>,
+}
+
+impl Accumulator {
+    fn new(n: usize) -> Accumulator {
+        Accumulator {
+            h: vec![0.0; n * n],
+            g: vec![0.0; n],
+            e: 0.0,
+            blocks: Vec::new(),
+            cols: Vec::new(),
+            scalar_cols: Vec::new(),
+        }
+    }
+
+    /// `self` plus `other`'s sums (in this order: the same bits on every run).
+    fn add(mut self, other: Accumulator) -> Accumulator {
+        self.h.iter_mut().zip(&other.h).for_each(|(x, y)| *x += y);
+        self.g.iter_mut().zip(&other.g).for_each(|(x, y)| *x += y);
+        self.e += other.e;
+        self
+    }
 }
 
 /// How a run of LM steps went.
