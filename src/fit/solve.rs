@@ -257,18 +257,11 @@ impl<'a> HeldProblem<'a> {
                 })
             })
             .collect();
-        let total = partials.into_iter().fold(zero(), Accumulator::add);
+        let mut total = partials.into_iter().fold(zero(), Accumulator::add);
         let mut e = total.e;
         g.iter_mut().zip(&total.g).for_each(|(x, y)| *x += y);
-        // Both triangles from the one summed (see `point_equations`).
-        for i in 0..n {
-            h[i * n + i] += total.h[i * n + i];
-            for j in (i + 1)..n {
-                let s = total.h[i * n + j] + total.h[j * n + i];
-                h[i * n + j] += s;
-                h[j * n + i] += s;
-            }
-        }
+        fold_triangles(&mut total.h, n);
+        h.iter_mut().zip(&total.h).for_each(|(x, y)| *x += y);
         for m in &self.plane_rigid {
             m.add_normal_equations(bones, 1.0, h, g);
             e += m.energy(bones);
@@ -328,16 +321,8 @@ impl<'a> HeldProblem<'a> {
             mut e,
             ..
         } = partials.into_iter().fold(zero(), Accumulator::add);
-        // Only one triangle of each pair (i, j) was summed, in the order the columns came;
-        // fold both triangles into a symmetric matrix.
+        fold_triangles(&mut h, n);
         let mut hm = DMatrix::from_row_slice(n, n, &h);
-        for i in 0..n {
-            for j in (i + 1)..n {
-                let s = hm[(i, j)] + hm[(j, i)];
-                hm[(i, j)] = s;
-                hm[(j, i)] = s;
-            }
-        }
         // The closed-form terms, both triangles.
         h.fill(0.0);
         for m in &self.rigid {
@@ -346,6 +331,18 @@ impl<'a> HeldProblem<'a> {
         }
         hm += DMatrix::from_row_slice(n, n, &h);
         (hm, DVector::from_vec(g), e)
+    }
+}
+
+/// Makes `h` (n x n, row-major) symmetric where only one triangle of each pair (i, j) was
+/// summed, in whichever order the columns came: both entries become their sum.
+fn fold_triangles(h: &mut [f64], n: usize) {
+    for i in 0..n {
+        for j in (i + 1)..n {
+            let s = h[i * n + j] + h[j * n + i];
+            h[i * n + j] = s;
+            h[j * n + i] = s;
+        }
     }
 }
 
