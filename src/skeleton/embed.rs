@@ -765,23 +765,25 @@ fn descend_joints(
     // before the descent has turned a T-pose's arms, 0.85 looks best.
     for limb in limbs(template) {
         let root = joints.points[joints.ends[limb[0]].0];
-        let moving: Vec<usize> = limb.iter().map(|&b| joints.ends[b].1).collect();
-        let base = joints.clone();
-        let mut best = (energy(&joints), 1.0);
-        for k in 0..=LIMB_SCALES {
-            let f = 1.0 + 0.2 * k as f64 / LIMB_SCALES as f64;
-            let mut trial = base.clone();
-            for &i in &moving {
-                trial.points[i] = root + (base.points[i] - root) * f;
+        let scaled = |f: f64| {
+            let mut j = joints.clone();
+            for &b in &limb {
+                let i = j.ends[b].1;
+                j.points[i] = root + (joints.points[i] - root) * f;
             }
-            let et = energy(&trial);
-            if et < best.0 {
-                best = (et, f);
-            }
-        }
-        for &i in &moving {
-            joints.points[i] = root + (base.points[i] - root) * best.1;
-        }
+            j
+        };
+        let (_, f) = (1..=LIMB_SCALES)
+            .map(|k| 1.0 + 0.2 * k as f64 / LIMB_SCALES as f64)
+            .fold((energy(&joints), 1.0), |best, f| {
+                let e = energy(&scaled(f));
+                if e < best.0 {
+                    (e, f)
+                } else {
+                    best
+                }
+            });
+        joints = scaled(f);
     }
     let mut e = energy(&joints);
     let mut step = 0.005;

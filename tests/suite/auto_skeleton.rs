@@ -1,8 +1,8 @@
 //! `pipeline skeleton`: the built-in humanoid template embedded in the reference frame's
 //! surface, on synthetic humanoids of four different bodies (height within 15%, limbs
 //! within 7% more; body 4 the smallest, its arms the longest for its height) at 12 and 8
-//! cameras, against the generator's true skeleton; tracking
-//! from the automatic skeleton; and the refusals.
+//! cameras, against the generator's true skeleton; tracking from the automatic skeleton;
+//! and the refusals.
 
 use crate::common;
 
