@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Format of the state file (bumped with any change of its fields or meaning).
-const FORMAT: u32 = 1;
+const FORMAT: u32 = 2;
 
 /// The stage folder's name.
 pub const STAGE: &str = "fit";
@@ -134,6 +134,7 @@ struct StateFile {
     unexplained_vertices: usize,
     unexplained_bone: Option<usize>,
     recovery: Option<String>,
+    ambiguous: Option<u64>,
     iou_worst: u64,
 }
 
@@ -165,6 +166,7 @@ fn write_state(path: &Path, frame: u32, state: &FitState) -> Result<()> {
         unexplained_vertices: d.unexplained.vertices,
         unexplained_bone: d.unexplained.bone,
         recovery: d.recovery.clone(),
+        ambiguous: d.ambiguous.map(f64::to_bits),
         iou_worst: state.iou_worst.to_bits(),
     };
     let text = serde_json::to_string(&file)
@@ -206,6 +208,7 @@ fn read(path: &Path, frame: u32, bones: usize) -> Result<FitState> {
     diagnostics.unexplained.vertices = f.unexplained_vertices;
     diagnostics.unexplained.bone = f.unexplained_bone.filter(|&b| b < bones);
     diagnostics.recovery = f.recovery;
+    diagnostics.ambiguous = f.ambiguous.map(real);
     let pose = Pose {
         translation: Vector3::from(f.translation.map(real)),
         rotations: f
@@ -243,6 +246,7 @@ mod tests {
         let mut diagnostics = FitDiagnostics::unfitted(FitStatus::Converged, 1234);
         diagnostics.energy = std::f64::consts::PI * 1e-5;
         diagnostics.recovery = Some("kept".into());
+        diagnostics.ambiguous = Some(0.1 + 0.037);
         diagnostics.unexplained.bone = Some(1);
         let state = FitState {
             pose,

@@ -45,6 +45,9 @@ pub struct Health {
     pub trunk_twist_deg: f64,
     /// Eq. 4 against the previous tracked frame's (0: unknown).
     pub energy_ratio: f64,
+    /// How far an equally good fit of one limb lies, metres
+    /// ([`crate::fit::FitDiagnostics::ambiguous`]).
+    pub ambiguous: Option<f64>,
 }
 
 /// The body model's mesh coarsened for the silhouette check (vertex clustering on a grid of
@@ -159,6 +162,7 @@ pub fn summarize(iou: &[f64], joint_motion: f64) -> Health {
         end_bend_deg: 0.0,
         trunk_twist_deg: 0.0,
         energy_ratio: 0.0,
+        ambiguous: None,
     }
 }
 
@@ -240,7 +244,8 @@ pub const RECENT_FRAMES: usize = 5;
 /// parts overlap deeper than `p.interpenetration_cm`, `bent_joint` when an end bone swung
 /// more than `p.bend_deg` from its reference direction, `twisted_trunk` when the hips
 /// turned more than `p.twist_deg` from the shoulders, `energy_jump` when eq. 4 rose more
-/// than `p.energy_jump` times the previous frame's.
+/// than `p.energy_jump` times the previous frame's, `ambiguous` when an equally good fit
+/// of one limb lies a hand's length away.
 pub fn flags(
     h: &Health,
     recent: &[f64],
@@ -273,6 +278,9 @@ pub fn flags(
     }
     if h.energy_ratio > p.energy_jump {
         out.push("energy_jump");
+    }
+    if h.ambiguous.is_some() {
+        out.push("ambiguous");
     }
     out
 }
@@ -337,6 +345,7 @@ mod tests {
         lost.end_bend_deg = 150.0;
         lost.trunk_twist_deg = 100.0;
         lost.energy_ratio = 12.0;
+        lost.ambiguous = Some(0.137);
         assert_eq!(
             flags(&lost, &[0.96], Some(0.96), &p, Some(25.0)),
             [
@@ -347,7 +356,8 @@ mod tests {
                 "interpenetration",
                 "bent_joint",
                 "twisted_trunk",
-                "energy_jump"
+                "energy_jump",
+                "ambiguous"
             ]
         );
         assert_eq!(
@@ -357,7 +367,8 @@ mod tests {
                 "interpenetration",
                 "bent_joint",
                 "twisted_trunk",
-                "energy_jump"
+                "energy_jump",
+                "ambiguous"
             ]
         );
         // An unknown frame rate judges no speed.
@@ -368,7 +379,8 @@ mod tests {
                 "interpenetration",
                 "bent_joint",
                 "twisted_trunk",
-                "energy_jump"
+                "energy_jump",
+                "ambiguous"
             ]
         );
         // A slow drift: level with the recent frames, far below the reference.

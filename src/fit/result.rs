@@ -77,6 +77,10 @@ pub struct FitDiagnostics {
     /// Recovery (`recovery.rs`): not tried (`None`), tried and the first fit kept
     /// (`kept`), or the hypothesis that won.
     pub recovery: Option<String>,
+    /// How far an equally good fit of one limb lies from this pose, metres (the largest
+    /// joint motion between the two), when the frame's evidence could not choose between
+    /// them (`tracking.rs`, `ambiguity`); `None` when there was no such fit.
+    pub ambiguous: Option<f64>,
 }
 
 impl FitDiagnostics {
@@ -94,6 +98,7 @@ impl FitDiagnostics {
             observed,
             unexplained: Default::default(),
             recovery: None,
+            ambiguous: None,
         }
     }
 }

@@ -158,25 +158,31 @@ impl Fitter<'_> {
         if !p.restart.enabled {
             return best;
         }
-        if !self.lost(&best, &first, previous, previous_fit) {
-            let best = self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
-            return self.recovered(&prepared, best, previous, cap, silhouettes, probe);
-        }
-        let mut rest = Pose::rest(previous.rotations.len());
-        rest.translation = previous.translation;
-        // A start already tried would end where it did (the fit is deterministic): at the
-        // frame after t0 the previous pose is the reference pose itself.
-        let mut starts: Vec<Pose> = Vec::new();
-        for start in second.into_iter().chain([rest]) {
-            if start != first && !starts.contains(&start) {
-                starts.push(start);
+        if self.lost(&best, &first, previous, previous_fit) {
+            let mut rest = Pose::rest(previous.rotations.len());
+            rest.translation = previous.translation;
+            // A start already tried would end where it did (the fit is deterministic): at
+            // the frame after t0 the previous pose is the reference pose itself.
+            let mut starts: Vec<Pose> = Vec::new();
+            for start in second.into_iter().chain([rest]) {
+                if start != first && !starts.contains(&start) {
+                    starts.push(start);
+                }
+            }
+            for start in &starts {
+                let r = self.fit_prepared(&prepared, start, cap * p.restart.rounds_factor, probe);
+                best = better(best, r);
             }
         }
-        for start in &starts {
-            let r = self.fit_prepared(&prepared, start, cap * p.restart.rounds_factor, probe);
-            best = better(best, r);
-        }
-        let best = self.unfolded(&prepared, best, previous, predicted.as_ref(), cap, probe);
+        let best = self.unfolded(
+            &prepared,
+            best,
+            previous,
+            predicted.as_ref(),
+            cap,
+            silhouettes,
+            probe,
+        );
         self.recovered(&prepared, best, previous, cap, silhouettes, probe)
     }
 
@@ -202,6 +208,10 @@ impl Fitter<'_> {
     /// back as it was in `previous`, its children following, and fitted again from there;
     /// the lower score wins. On the humanoid the right hand folded
     /// back at t11-t14 as the forearms crossed the chest (2.41 cm); unfolded, 0.25 cm.
+    /// When the two lie [`AMBIGUOUS_REACH`] or more apart and the evidence does not choose
+    /// between them ([`ambiguity`]), the winner records how far the other lies
+    /// ([`super::FitDiagnostics::ambiguous`]): the frame is flagged `ambiguous`.
+    #[allow(clippy::too_many_arguments)]
     fn unfolded(
         &self,
         prepared: &super::pairs::Prepared,
@@ -209,6 +219,7 @@ impl Fitter<'_> {
         previous: &Pose,
         predicted: Option<&Pose>,
         cap: usize,
+        silhouettes: Option<&dyn SilhouetteScore>,
         probe: &Probe,
     ) -> FitResult {
         let skeleton = &self.model.skeleton;
@@ -222,7 +233,10 @@ impl Fitter<'_> {
         let mut start = best.pose.clone();
         start.rotations[bone] = previous.rotations[bone];
         let r = self.fit_prepared(prepared, &start, cap, probe);
-        better(best, r)
+        let ambiguous = ambiguity(self.model, &best, &r, silhouettes);
+        let mut chosen = better(best, r);
+        chosen.diagnostics.ambiguous = ambiguous;
+        chosen
     }
 
     /// Whether a tracked frame's fit from `start` looks lost, so that other starts are
@@ -323,6 +337,39 @@ pub(super) fn pick(a: FitResult, b: FitResult, take_b: bool) -> FitResult {
     best.diagnostics.iterations = rounds;
     best.diagnostics.lm_steps = steps;
     best
+}
+
+/// Two fits of a frame this far apart (their largest joint motion, metres) that the
+/// evidence does not choose between make the frame `ambiguous`: a hand's length. On the
+/// humanoid in a dress (t15), the right hand held straight in front of the skirt (the
+/// truth) and folded against the belly (15.8 cm off) end 13.7 cm apart.
+pub const AMBIGUOUS_REACH: f64 = 0.1;
+
+/// How far apart fits `a` and `b` of one frame lie (metres) when the evidence does not
+/// choose between them: they lie [`AMBIGUOUS_REACH`] or more apart, eq. 4 (with rho_c) and
+/// the score (without it) prefer different ones, and the silhouettes' worst IoUs lie
+/// within [`super::recovery::SILHOUETTE_MARGIN`] of each other (or cannot be read). A
+/// hand against the body is such a case: rho_c discounts the contact wherever it is, so
+/// eq. 4 may prefer one fit while the score, which counts the contact in full, prefers the
+/// other, and in every camera the hand lies inside the body's outline.
+fn ambiguity(
+    model: &BodyModel,
+    a: &FitResult,
+    b: &FitResult,
+    silhouettes: Option<&dyn SilhouetteScore>,
+) -> Option<f64> {
+    let apart = joint_motion(model, &a.pose, &b.pose);
+    let (da, db) = (&a.diagnostics, &b.diagnostics);
+    if apart < AMBIGUOUS_REACH || (da.energy < db.energy) == (da.score < db.score) {
+        return None;
+    }
+    let ious = silhouettes.map(|s| (s.worst_iou(&a.pose), s.worst_iou(&b.pose)));
+    if let Some((Some(x), Some(y))) = ious {
+        if (x - y).abs() > super::recovery::SILHOUETTE_MARGIN {
+            return None;
+        }
+    }
+    Some(apart)
 }
 
 /// The bone whose direction in its parent's frame (its joint's bend; the twist about the

@@ -405,6 +405,7 @@ fn fitted_frame(
     health.energy_ratio = previous_energy
         .filter(|&e| e > 0.0)
         .map_or(0.0, |e| result.diagnostics.energy / e);
+    health.ambiguous = result.diagnostics.ambiguous;
     health.unexplained_cm2 = settings
         .photo
         .then(|| crate::fit::unexplained_cm2(&result.diagnostics, settings.fit.sample_spacing));
@@ -607,6 +608,7 @@ pub fn parse_diagnostics(path: &Path, text: &str) -> Result<Vec<(u32, FitDiagnos
             score: real(score)?,
             unexplained: Default::default(),
             recovery: None,
+            ambiguous: None,
         };
         out.push((frame, diagnostics));
     }

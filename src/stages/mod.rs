@@ -404,7 +404,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::Tracked,
         about: "robust articulated fitting of the body model to every frame, tracked from t0",
         inputs: &["silhouette", "reliability", "model"],
-        format_version: 13,
+        format_version: 14,
         sources: fit::sources,
         compute: Compute::Tracked(&fit::STAGE),
         finish: Some(fit::finish),

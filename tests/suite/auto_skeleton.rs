@@ -179,6 +179,16 @@ fn a_dress_and_no_open_pose_at_the_start_are_embedded_and_tracked() {
     eprintln!("arms down, tracked: mean joint error per frame (cm): {errors:.2?}");
     assert_eq!(errors.len(), 16);
     assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
-    // A good track through the dress: no frame flagged, none below 0.9 x the reference IoU.
-    assert_fit_health(d);
+    // Through the dress: no frame below 0.9 x the reference IoU; the flags follow the truth
+    // and recovery ran on at most 10% of the frames (the bounds for flags that mean
+    // something). At t15 the right hand folds against the belly (15.8 cm off), which fits
+    // the evidence as well as the true hand straight before the skirt: flagged `ambiguous`.
+    let rows = assert_silhouettes_held(d);
+    assert_flags_follow_truth(d, "humanoid");
+    let recovered = rows.iter().filter(|r| !r.recovery.is_empty()).count();
+    assert!(
+        10 * recovered <= rows.len(),
+        "recovery on {recovered} of {} frames",
+        rows.len()
+    );
 }
