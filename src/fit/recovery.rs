@@ -131,16 +131,7 @@ pub const BY_SILHOUETTES: &str = " by silhouettes";
 /// show. When the silhouettes overrule the score, the winner's `recovery` says so
 /// ([`BY_SILHOUETTES`]).
 fn judged(kept: FitResult, recovered: FitResult, silhouettes: &dyn SilhouetteScore) -> FitResult {
-    let ious = (
-        silhouettes.worst_iou(&kept.pose),
-        silhouettes.worst_iou(&recovered.pose),
-    );
-    let winner = match ious {
-        (Some(a), Some(b)) if b > a + SILHOUETTE_MARGIN => Some(true),
-        (Some(a), Some(b)) if a > b + SILHOUETTE_MARGIN => Some(false),
-        _ => None,
-    };
-    let Some(take_recovered) = winner else {
+    let Some(take_recovered) = prefers_second(silhouettes, &kept.pose, &recovered.pose) else {
         return super::tracking::better(kept, recovered);
     };
     let score_prefers_recovered = recovered.diagnostics.score < kept.diagnostics.score;
@@ -151,6 +142,21 @@ fn judged(kept: FitResult, recovered: FitResult, silhouettes: &dyn SilhouetteSco
         }
     }
     best
+}
+
+/// Whether the silhouettes prefer pose `b` to pose `a` (`Some(true)`) or `a` to `b`
+/// (`Some(false)`): their worst-camera IoUs differ by more than [`SILHOUETTE_MARGIN`].
+/// `None` when they lie closer or cannot be read.
+pub(super) fn prefers_second(
+    silhouettes: &dyn SilhouetteScore,
+    a: &Pose,
+    b: &Pose,
+) -> Option<bool> {
+    match (silhouettes.worst_iou(a), silhouettes.worst_iou(b)) {
+        (Some(x), Some(y)) if y > x + SILHOUETTE_MARGIN => Some(true),
+        (Some(x), Some(y)) if x > y + SILHOUETTE_MARGIN => Some(false),
+        _ => None,
+    }
 }
 
 /// Rounds each recovery hypothesis is fitted before the most promising one goes on.

@@ -343,7 +343,7 @@ pub(super) fn pick(a: FitResult, b: FitResult, take_b: bool) -> FitResult {
 /// evidence does not choose between make the frame `ambiguous`: a hand's length. On the
 /// humanoid in a dress (t15), the right hand held straight in front of the skirt (the
 /// truth) and folded against the belly (15.8 cm off) end 13.7 cm apart.
-pub const AMBIGUOUS_REACH: f64 = 0.1;
+const AMBIGUOUS_REACH: f64 = 0.1;
 
 /// How far apart fits `a` and `b` of one frame lie (metres) when the evidence does not
 /// choose between them: they lie [`AMBIGUOUS_REACH`] or more apart, eq. 4 (with rho_c) and
@@ -363,13 +363,10 @@ fn ambiguity(
     if apart < AMBIGUOUS_REACH || (da.energy < db.energy) == (da.score < db.score) {
         return None;
     }
-    let ious = silhouettes.map(|s| (s.worst_iou(&a.pose), s.worst_iou(&b.pose)));
-    if let Some((Some(x), Some(y))) = ious {
-        if (x - y).abs() > super::recovery::SILHOUETTE_MARGIN {
-            return None;
-        }
-    }
-    Some(apart)
+    let decided = silhouettes
+        .and_then(|s| super::recovery::prefers_second(s, &a.pose, &b.pose))
+        .is_some();
+    (!decided).then_some(apart)
 }
 
 /// The bone whose direction in its parent's frame (its joint's bend; the twist about the
