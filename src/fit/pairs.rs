@@ -4,9 +4,10 @@
 
 use super::kept_nearest::{MovingPoints, MovingQueries};
 use super::probe::Probe;
-use super::{FitParams, Observation};
+use super::{FitParams, Method, Observation};
 use crate::geometry::cell_grid::CellGrid;
 use crate::geometry::nearest::{key, NearestTree};
+use crate::geometry::oriented_nearest::OrientedTree;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -35,6 +36,9 @@ pub(super) struct Prepared {
     /// Finite observed vertices thinned to `sample_spacing`.
     pub obs: Observation,
     pub tree: NearestTree,
+    /// The same points with their normals, for the `normals` baseline's search (`None` for
+    /// the other methods).
+    pub oriented: Option<OrientedTree>,
     /// The same points in cells ([`search_cell`]), for the short searches.
     pub grid: CellGrid,
     /// Nearest answers kept between this frame's rounds, both ways (every start's rounds
@@ -82,8 +86,11 @@ pub(super) fn prepare(obs: &Observation, p: &FitParams, model_vertices: usize) -
     };
     let tree = NearestTree::new(&obs.vertices);
     let grid = CellGrid::new(tree.keys(), search_cell(p.sample_spacing));
+    let oriented =
+        (p.method == Method::Normals).then(|| OrientedTree::new(&obs.vertices, &obs.normals));
     Some(Prepared {
         grid,
+        oriented,
         observed: input_count,
         obs,
         tree,
@@ -115,61 +122,85 @@ pub fn thin(points: &[Vector3<f64>], spacing: f64) -> Vec<usize> {
     keep
 }
 
-/// A pair test on (model vertex, observed vertex): whether their normals agree.
-pub(super) type Agree<'a> = &'a (dyn Fn(usize, usize) -> bool + Sync);
+/// Whether a model vertex's normal and an observed vertex's agree, for the `normals`
+/// baseline: their dot product is at least `min_dot` (the cosine of `normal_angle_deg`).
+pub(super) fn normals_agree(model: &Vector3<f64>, observed: &Vector3<f64>, min_dot: f64) -> bool {
+    model.dot(observed) >= min_dot
+}
 
 /// The nearest partners both ways of the posed model vertices `posed`: each model vertex's
 /// observed partner, then each observed vertex's model partner. With `compatible` (the
-/// `normals` baseline: Ogawara et al.'s search, as the paper's Fig. 12 describes it) the
-/// nearest whose normal agrees, within [`COMPATIBLE_SEARCH_LIMIT`]; a model vertex may so
-/// pair with a phantom surface or, where the touching surfaces are missing, with the far
-/// side of the other part. Without it, the nearest, reusing the earlier rounds' answers
+/// `normals` baseline: Ogawara et al.'s search, as the paper's Fig. 12 describes it: the
+/// posed model's normals and the smallest dot product with which they agree) the nearest
+/// whose normal agrees ([`normals_agree`]), within [`COMPATIBLE_SEARCH_LIMIT`]; a model vertex
+/// may so pair with a phantom surface or, where the touching surfaces are missing, with the
+/// far side of the other part. Without it, the nearest, reusing the earlier rounds' answers
 /// that still hold (`kept_nearest`: the same answers as fresh searches).
 pub(super) fn find_pairs(
     prepared: &Prepared,
     posed: &[Vector3<f64>],
-    compatible: Option<Agree>,
+    compatible: Option<(&[Vector3<f64>], f64)>,
     model_cell: f64,
     probe: &Probe,
 ) -> (Vec<Partner>, Vec<Partner>) {
-    match compatible {
-        Some(agree) => compatible_pairs(prepared, posed, agree, probe),
-        None => nearest_pairs(prepared, posed, model_cell, probe),
+    match (compatible, &prepared.oriented) {
+        (Some((normals, min_dot)), Some(oriented)) => {
+            compatible_pairs(prepared, oriented, posed, normals, min_dot, probe)
+        }
+        _ => nearest_pairs(prepared, posed, model_cell, probe),
     }
 }
 
-/// [`find_pairs`] with normals that must agree.
+/// [`find_pairs`] with normals that must agree, in trees that bound their points' normals.
 fn compatible_pairs(
     prepared: &Prepared,
+    observed_tree: &OrientedTree,
     posed: &[Vector3<f64>],
-    agree: Agree,
+    normals: &[Vector3<f64>],
+    min_dot: f64,
     probe: &Probe,
 ) -> (Vec<Partner>, Vec<Partner>) {
-    // Each query's nearest partner in `tree` for which `agrees(query, partner)`.
-    let partners = |queries: &[Vector3<f64>],
-                    tree: &NearestTree,
-                    agrees: &(dyn Fn(usize, usize) -> bool + Sync)|
-     -> Vec<Partner> {
-        queries
-            .par_iter()
-            .enumerate()
-            .map(|(i, q)| {
-                tree.nearest_where(q, COMPATIBLE_SEARCH_LIMIT, |j| agrees(i, j))
-                    .map_or((0, f64::INFINITY), |x| x)
-            })
-            .collect()
-    };
+    let obs = &prepared.obs;
     // Model -> observed, while the model's tree for the way back is built.
     let (forward, model_tree) = rayon::join(
         || {
             probe.time("nearest model->observed", || {
-                partners(posed, &prepared.tree, &|v, u| agree(v, u))
+                (0..posed.len())
+                    .into_par_iter()
+                    .map(|v| {
+                        let agrees =
+                            |u: usize| normals_agree(&normals[v], &obs.normals[u], min_dot);
+                        observed_tree
+                            .nearest_agreeing(
+                                &posed[v],
+                                &normals[v],
+                                min_dot,
+                                COMPATIBLE_SEARCH_LIMIT,
+                                &agrees,
+                            )
+                            .unwrap_or((0, f64::INFINITY))
+                    })
+                    .collect::<Vec<Partner>>()
             })
         },
-        || probe.time("model tree", || NearestTree::new(posed)),
+        || probe.time("model tree", || OrientedTree::new(posed, normals)),
     );
     let backward = probe.time("nearest observed->model", || {
-        partners(&prepared.obs.vertices, &model_tree, &|u, v| agree(v, u))
+        (0..obs.vertices.len())
+            .into_par_iter()
+            .map(|u| {
+                let agrees = |v: usize| normals_agree(&normals[v], &obs.normals[u], min_dot);
+                model_tree
+                    .nearest_agreeing(
+                        &obs.vertices[u],
+                        &obs.normals[u],
+                        min_dot,
+                        COMPATIBLE_SEARCH_LIMIT,
+                        &agrees,
+                    )
+                    .unwrap_or((0, f64::INFINITY))
+            })
+            .collect()
     });
     (forward, backward)
 }

@@ -5,7 +5,7 @@
 //! Paper eq. 4, with each pair weighted by its own two ends (model vertex v, observed u):
 //! `E(p) = sum_pairs rho_c(v)/R_c * rho_p(u)/R_p * |v - u|^2`.
 
-use super::pairs::{find_pairs, search_cell, Partner, Prepared};
+use super::pairs::{find_pairs, normals_agree, search_cell, Partner, Prepared};
 use super::probe::{Probe, RHO_C_REBUILDING, RHO_C_SCANNING, RHO_C_STALENESS};
 use super::solve::{Plane, Targets};
 use super::{Fitter, Method, Observation, Unexplained};
@@ -104,8 +104,8 @@ impl Fitter<'_> {
             }
         };
         let cos_limit = p.normal_angle_deg.to_radians().cos();
-        let agree = |v: usize, u: usize| normals[v].dot(&obs.normals[u]) >= cos_limit;
-        let compatible = (method == Method::Normals).then_some(&agree as _);
+        let agree = |v: usize, u: usize| normals_agree(&normals[v], &obs.normals[u], cos_limit);
+        let compatible = (method == Method::Normals).then_some((&normals[..], cos_limit));
         let find = || {
             find_pairs(
                 prepared,

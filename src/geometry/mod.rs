@@ -10,6 +10,7 @@ pub mod isosurface;
 pub mod mesh;
 pub mod nearest;
 pub mod obj;
+pub mod oriented_nearest;
 pub mod ply;
 pub mod raster;
 pub mod smooth;

@@ -108,34 +108,6 @@ impl NearestTree {
         Some((first.item as usize, first.distance as f64, second))
     }
 
-    /// The nearest point to `q` that `accept`s, within `limit` metres: (index, squared
-    /// distance in m^2; ties to the lower index). Searches balls that double from twice the
-    /// nearest point's distance, so points far beyond the answer are not visited.
-    pub fn nearest_where(
-        &self,
-        q: &Vector3<f64>,
-        limit: f64,
-        accept: impl Fn(usize) -> bool,
-    ) -> Option<(usize, f64)> {
-        let (first, d2) = self.nearest(q)?;
-        if accept(first) {
-            return Some((first, d2));
-        }
-        let mut radius = (2.0 * d2.sqrt()).max(0.005).min(limit);
-        loop {
-            let mut best: Option<(usize, f64)> = None;
-            self.within(q, radius, |i, d2| {
-                if accept(i) && best.is_none_or(|(j, e)| d2 < e || (d2 == e && i < j)) {
-                    best = Some((i, d2));
-                }
-            });
-            if best.is_some() || radius >= limit {
-                return best;
-            }
-            radius = (2.0 * radius).min(limit);
-        }
-    }
-
     /// Calls `visit(index, squared distance)` for every point within `radius` metres of `q`,
     /// in no particular order.
     pub fn within(&self, q: &Vector3<f64>, radius: f64, visit: impl FnMut(usize, f64)) {
@@ -226,24 +198,5 @@ mod tests {
             assert!(count >= truth, "{count} < {truth}");
         }
         assert!(NearestTree::new(&[]).nearest(&Vector3::zeros()).is_none());
-        // The nearest point with an odd index, against a brute-force search.
-        for _ in 0..300 {
-            let q = Vector3::new(rnd(), rnd(), rnd()) + Vector3::new(0.003, 0.001, 0.002);
-            let truth = points
-                .iter()
-                .enumerate()
-                .filter(|(i, p)| i % 2 == 1 && (*p - q).norm() <= 0.03)
-                .map(|(_, p)| (p - q).norm_squared())
-                .fold(f64::INFINITY, f64::min);
-            match tree.nearest_where(&q, 0.03, |i| i % 2 == 1) {
-                Some((i, d2)) => {
-                    assert!(
-                        i % 2 == 1 && (d2 - truth).abs() < 1e-6,
-                        "{d2} against {truth}"
-                    );
-                }
-                None => assert!(truth > 0.03f64.powi(2) - 1e-6, "missed {truth}"),
-            }
-        }
     }
 }
