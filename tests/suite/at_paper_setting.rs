@@ -122,7 +122,8 @@ fn proposed_fit_tracks_the_tripod_where_baselines_slip() {
     // doubled, the round cap doubled), over every frame: the bounds must not hinge on them.
     // The baselines start from the constant-velocity prediction, as in the README's table,
     // and run as the paper ran them: without the restarts and recovery this project adds
-    // (which cost the `normals` baseline 12 s on each phantom frame and do not save it).
+    // (which cost the `normals` baseline 6 s on each phantom frame in a release build and do
+    // not save it).
     use hullpose::fit::{FitParams, Method, Start};
     let method = |method| {
         let mut p = FitParams {
