@@ -79,9 +79,9 @@ impl OrientedTree {
 
     /// The nearest point to `q` within `limit` metres whose normal may agree with `normal`
     /// (unit) at a dot product of at least `min_dot` and which `accept`s (the exact test):
-    /// (index, squared distance in m^2; ties to the lower index). `accept` is called only on
-    /// points whose f32 normal lies within the bound's slack of agreeing, so it must hold no
-    /// point whose normal disagrees.
+    /// (index, squared distance in m^2; ties to the lower index). `accept` must refuse every
+    /// point whose normal's dot product with `normal` is below `min_dot`: subtrees are skipped
+    /// on that test alone, so a point it would accept there is never offered.
     pub fn nearest_agreeing(
         &self,
         q: &Vector3<f64>,
