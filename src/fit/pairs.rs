@@ -143,64 +143,53 @@ pub(super) fn find_pairs(
     model_cell: f64,
     probe: &Probe,
 ) -> (Vec<Partner>, Vec<Partner>) {
-    match (compatible, &prepared.oriented) {
-        (Some((normals, min_dot)), Some(oriented)) => {
-            compatible_pairs(prepared, oriented, posed, normals, min_dot, probe)
-        }
-        _ => nearest_pairs(prepared, posed, model_cell, probe),
+    match compatible {
+        Some((normals, min_dot)) => compatible_pairs(prepared, posed, normals, min_dot, probe),
+        None => nearest_pairs(prepared, posed, model_cell, probe),
     }
 }
 
 /// [`find_pairs`] with normals that must agree, in trees that bound their points' normals.
 fn compatible_pairs(
     prepared: &Prepared,
-    observed_tree: &OrientedTree,
     posed: &[Vector3<f64>],
     normals: &[Vector3<f64>],
     min_dot: f64,
     probe: &Probe,
 ) -> (Vec<Partner>, Vec<Partner>) {
     let obs = &prepared.obs;
+    let observed_tree = prepared
+        .oriented
+        .as_ref()
+        .expect("`prepare` builds the oriented tree for the `normals` method");
+    // Each query's nearest partner in `tree` (whose points have `tree_normals`) with a normal
+    // that agrees.
+    let partners = |queries: &[Vector3<f64>],
+                    query_normals: &[Vector3<f64>],
+                    tree: &OrientedTree,
+                    tree_normals: &[Vector3<f64>]|
+     -> Vec<Partner> {
+        queries
+            .par_iter()
+            .zip(query_normals)
+            .map(|(q, n)| {
+                let agrees = |j: usize| normals_agree(n, &tree_normals[j], min_dot);
+                tree.nearest_agreeing(q, n, min_dot, COMPATIBLE_SEARCH_LIMIT, &agrees)
+                    .unwrap_or((0, f64::INFINITY))
+            })
+            .collect()
+    };
     // Model -> observed, while the model's tree for the way back is built.
     let (forward, model_tree) = rayon::join(
         || {
             probe.time("nearest model->observed", || {
-                (0..posed.len())
-                    .into_par_iter()
-                    .map(|v| {
-                        let agrees =
-                            |u: usize| normals_agree(&normals[v], &obs.normals[u], min_dot);
-                        observed_tree
-                            .nearest_agreeing(
-                                &posed[v],
-                                &normals[v],
-                                min_dot,
-                                COMPATIBLE_SEARCH_LIMIT,
-                                &agrees,
-                            )
-                            .unwrap_or((0, f64::INFINITY))
-                    })
-                    .collect::<Vec<Partner>>()
+                partners(posed, normals, observed_tree, &obs.normals)
             })
         },
         || probe.time("model tree", || OrientedTree::new(posed, normals)),
     );
     let backward = probe.time("nearest observed->model", || {
-        (0..obs.vertices.len())
-            .into_par_iter()
-            .map(|u| {
-                let agrees = |v: usize| normals_agree(&normals[v], &obs.normals[u], min_dot);
-                model_tree
-                    .nearest_agreeing(
-                        &obs.vertices[u],
-                        &obs.normals[u],
-                        min_dot,
-                        COMPATIBLE_SEARCH_LIMIT,
-                        &agrees,
-                    )
-                    .unwrap_or((0, f64::INFINITY))
-            })
-            .collect()
+        partners(&obs.vertices, &obs.normals, &model_tree, normals)
     });
     (forward, backward)
 }

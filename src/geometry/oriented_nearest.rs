@@ -114,6 +114,8 @@ impl OrientedTree {
                 let i = self.order[k];
                 let nearer = d2 < search.best_d2
                     || (d2 == search.best_d2 && search.best.is_none_or(|b| i < b));
+                // The leaf's own normals first (read in order, unlike `accept`'s): 10% of a
+                // round on the tripod.
                 if nearer
                     && normal_bound(&self.normals[k], &self.normals[k], &search.normal)
                         >= search.min_dot
