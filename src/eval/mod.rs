@@ -25,6 +25,7 @@ use std::fmt::Write as _;
 
 pub mod health_table;
 pub mod pose;
+pub mod pose_search;
 pub mod reliability;
 
 /// Points on `mesh`'s surface about `spacing` metres apart (deterministic).

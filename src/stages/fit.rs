@@ -342,6 +342,19 @@ impl HealthChecks {
     fn measured(&self, mesh: &TriMesh, observed: &[Vector3<f64>], reach: f64) -> TriMesh {
         crate::fit::surface_layer::follow(&self.coarse.posed(mesh), observed, reach)
     }
+
+    /// The silhouette IoU per camera of the posed model `mesh`, [`Self::measured`].
+    fn ious(
+        &self,
+        mesh: &TriMesh,
+        observed: &[Vector3<f64>],
+        reach: f64,
+        cameras: &[crate::camera::Camera],
+        masks: &[image::GrayImage],
+    ) -> Vec<f64> {
+        let measured = self.measured(mesh, observed, reach);
+        crate::fit::health::silhouette_iou(cameras, masks, &measured)
+    }
 }
 
 /// One frame's silhouettes as the judge of recovery's fits ([`crate::fit::SilhouetteScore`]),
@@ -363,11 +376,73 @@ impl crate::fit::SilhouetteScore for Silhouettes<'_> {
             .masks
             .get_or_init(|| self.inputs.silhouettes(self.frame).ok())
             .as_ref()?;
-        let mesh = self
-            .checks
-            .measured(&self.model.pose(pose), self.observed, self.reach);
-        let iou = crate::fit::health::silhouette_iou(&self.inputs.sequence.cameras, masks, &mesh);
+        let iou = self.checks.ious(
+            &self.model.pose(pose),
+            self.observed,
+            self.reach,
+            &self.inputs.sequence.cameras,
+            masks,
+        );
         Some(crate::fit::health::summarize(&iou, 0.0).iou_worst)
+    }
+}
+
+/// One fitted frame's silhouettes with everything the health check measures a pose by,
+/// loaded from the cache (`pipeline bench pose-search`): the same worst-camera IoU as
+/// fit.csv's `iou_worst` for the frame's fitted pose.
+pub struct FrameSilhouettes {
+    pub model: BodyModel,
+    /// The frame's fitted pose.
+    pub fitted: Pose,
+    checks: HealthChecks,
+    observed: Vec<Vector3<f64>>,
+    masks: Vec<image::GrayImage>,
+    cameras: Vec<crate::camera::Camera>,
+    /// `fit.health.surface_reach`, metres.
+    reach: f64,
+}
+
+impl FrameSilhouettes {
+    /// Frame `frame`'s silhouettes, observed surface and fitted pose from the cache; an
+    /// error naming what is missing when the frame was not fitted.
+    pub fn load(ctx: &Context, frame: u32) -> Result<FrameSilhouettes> {
+        let model = crate::artifacts::body_model::read(ctx.cache)?;
+        let fitted = fitted::read_state(ctx.cache, &model.skeleton, frame)
+            .map_err(|e| {
+                Error::Usage(format!(
+                    "frame {frame} has no cached fit ({e}); run the pipeline through the fit \
+                     stage for that frame first"
+                ))
+            })?
+            .pose;
+        let observed = cached_observation(ctx, frame)?.vertices;
+        let cameras = ctx.sequence.cameras.clone();
+        let masks = crate::artifacts::silhouettes::read(ctx.cache, frame, &cameras)?;
+        Ok(FrameSilhouettes {
+            checks: HealthChecks::new(&model),
+            model,
+            fitted,
+            observed,
+            masks,
+            cameras,
+            reach: ctx.config.fit.health.surface_reach,
+        })
+    }
+
+    /// The silhouette IoU of the model posed at `pose`, per camera (the health measure).
+    pub fn ious(&self, pose: &Pose) -> Vec<f64> {
+        self.checks.ious(
+            &self.model.pose(pose),
+            &self.observed,
+            self.reach,
+            &self.cameras,
+            &self.masks,
+        )
+    }
+
+    /// The cameras' names, in the order of [`Self::ious`].
+    pub fn camera_names(&self) -> Vec<&str> {
+        self.cameras.iter().map(|c| c.name.as_str()).collect()
     }
 }
 

@@ -30,6 +30,7 @@ mod learned_background;
 mod masks_only;
 mod model;
 mod parameter_table;
+mod pose_search;
 mod quick_start;
 mod realdata;
 mod report;
