@@ -27,6 +27,9 @@ use std::fmt::Write as _;
 const STEPS_DEG: [f64; 4] = [20.0, 10.0, 5.0, 2.5];
 /// A root move per degree of the current turn, metres (4 cm at 20 degrees).
 const ROOT_STEP_PER_DEGREE: f64 = 0.002;
+/// A rise of the worst IoU beyond this says the fit's pose is off (twice the margin by
+/// which the silhouettes overrule the fit's score in recovery).
+const CLEAR_GAIN: f64 = 0.01;
 /// Joints that moved less than this are not listed, metres.
 const LISTED_MOTION: f64 = 0.02;
 
@@ -60,8 +63,13 @@ pub fn worst(ious: &[f64]) -> (f64, usize) {
     )
 }
 
-/// Searches from `judge`'s fitted pose with at most `tries` posed-model IoUs.
-pub fn search(judge: &FrameSilhouettes, tries: usize) -> SearchResult {
+/// Searches from `judge`'s fitted pose with at most `tries` posed-model IoUs; `progress` is
+/// told after each try how many were made and the best worst IoU so far.
+pub fn search(
+    judge: &FrameSilhouettes,
+    tries: usize,
+    progress: &dyn Fn(usize, f64),
+) -> SearchResult {
     let fitted = judge.ious(&judge.fitted);
     let bones = judge.fitted.rotations.len();
     let (mut pose, mut best) = (judge.fitted.clone(), worst(&fitted).0);
@@ -85,10 +93,14 @@ pub fn search(judge: &FrameSilhouettes, tries: usize) -> SearchResult {
                         }
                         made += 1;
                         let w = worst(&judge.ious(&candidate)).0;
-                        if w > best {
+                        let better = w > best;
+                        if better {
                             (best, pose) = (w, candidate);
                             kept += 1;
                             improved = true;
+                        }
+                        progress(made, best);
+                        if better {
                             break; // the other sign would undo it
                         }
                     }
@@ -138,7 +150,20 @@ pub fn report(job: &Job, frame: u32, tries: usize) -> Result<String> {
     let ctx = job.context();
     let judge = FrameSilhouettes::load(&ctx, frame)?;
     let started = std::time::Instant::now();
-    let r = search(&judge, tries);
+    // Drawn on stderr, hidden when that is not a terminal.
+    let bar = indicatif::ProgressBar::new(tries as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "pose-search [{bar:30}] {pos}/{len} poses at most, worst IoU {msg} ({elapsed})",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    let r = search(&judge, tries, &|made, best| {
+        bar.set_position(made as u64);
+        bar.set_message(format!("{best:.4}"));
+    });
+    bar.finish_and_clear();
     let secs = started.elapsed().as_secs_f64();
     let names = judge.camera_names();
     let mut out = format!(
@@ -154,6 +179,15 @@ pub fn report(job: &Job, frame: u32, tries: usize) -> Result<String> {
         out,
         "  worst     {wf:.4} ({})  ->  {wn:.4} ({})",
         names[cf], names[cn]
+    );
+    let _ = writeln!(
+        out,
+        "{}",
+        if wn - wf > CLEAR_GAIN {
+            "  the silhouettes ask for another pose: the fit is off where joints moved"
+        } else {
+            "  no pose near the fit explains the silhouettes better by more than 0.01"
+        }
     );
     if r.moved.is_empty() {
         let _ = writeln!(out, "  no joint moved more than 2 cm");

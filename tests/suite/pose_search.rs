@@ -69,7 +69,7 @@ fn pose_search_finds_a_knocked_bone_and_leaves_a_good_fit() {
         knocked < good - 0.05,
         "knocked {knocked:.4}, fitted {good:.4}"
     );
-    let r = search(&judge, 300);
+    let r = search(&judge, 300, &|_, _| {});
     let back = worst(&r.found).0;
     eprintln!(
         "knocked {knocked:.4} -> {back:.4} (fitted {good:.4}); moved {:?}",
