@@ -14,7 +14,7 @@
 //! better: what the model misses is shape (a dress, hair) or lies far from the fit. The
 //! search is local: it bounds from below what the silhouettes allow nearby.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::runner::Job;
 use crate::skeleton::pose::PosedBones;
 use crate::skeleton::Pose;
@@ -49,18 +49,10 @@ pub struct SearchResult {
     pub kept: usize,
 }
 
-/// The worst of per-camera IoUs, and its camera's index.
+/// The worst of per-camera IoUs, and its camera's index (as the health check reports them).
 pub fn worst(ious: &[f64]) -> (f64, usize) {
-    ious.iter().enumerate().fold(
-        (f64::INFINITY, 0),
-        |(w, c), (i, &x)| {
-            if x < w {
-                (x, i)
-            } else {
-                (w, c)
-            }
-        },
-    )
+    let h = crate::fit::health::summarize(ious, 0.0);
+    (h.iou_worst, h.iou_worst_camera)
 }
 
 /// Searches from `judge`'s fitted pose with at most `tries` posed-model IoUs; `progress` is
@@ -142,11 +134,6 @@ pub fn search(
 
 /// `pipeline pose-search`: the search on `frame` of `job`, as a table.
 pub fn report(job: &Job, frame: u32, tries: usize) -> Result<String> {
-    if tries == 0 {
-        return Err(Error::Usage(
-            "pose-search: --tries must be at least 1".into(),
-        ));
-    }
     let ctx = job.context();
     let judge = FrameSilhouettes::load(&ctx, frame)?;
     let started = std::time::Instant::now();

@@ -337,13 +337,8 @@ impl HealthChecks {
         }
     }
 
-    /// The posed model `mesh`, coarse, and moved onto the frame's `observed` surface where
-    /// that lies within `reach` metres: what the silhouettes are compared with.
-    fn measured(&self, mesh: &TriMesh, observed: &[Vector3<f64>], reach: f64) -> TriMesh {
-        crate::fit::surface_layer::follow(&self.coarse.posed(mesh), observed, reach)
-    }
-
-    /// The silhouette IoU per camera of the posed model `mesh`, [`Self::measured`].
+    /// The silhouette IoU per camera of the posed model `mesh`, coarse, and moved onto the
+    /// frame's `observed` surface where that lies within `reach` metres (the health measure).
     fn ious(
         &self,
         mesh: &TriMesh,
@@ -352,7 +347,7 @@ impl HealthChecks {
         cameras: &[crate::camera::Camera],
         masks: &[image::GrayImage],
     ) -> Vec<f64> {
-        let measured = self.measured(mesh, observed, reach);
+        let measured = crate::fit::surface_layer::follow(&self.coarse.posed(mesh), observed, reach);
         crate::fit::health::silhouette_iou(cameras, masks, &measured)
     }
 }
@@ -388,7 +383,7 @@ impl crate::fit::SilhouetteScore for Silhouettes<'_> {
 }
 
 /// One fitted frame's silhouettes with everything the health check measures a pose by,
-/// loaded from the cache (`pipeline bench pose-search`): the same worst-camera IoU as
+/// loaded from the cache (`pipeline pose-search`): the same worst-camera IoU as
 /// fit.csv's `iou_worst` for the frame's fitted pose.
 pub struct FrameSilhouettes {
     pub model: BodyModel,
@@ -469,8 +464,17 @@ fn fitted_frame(
     let poses_csv = crate::poses::to_csv(skeleton, &[(frame, result.pose.clone())]);
     let joints_csv = crate::joints::to_csv(&joint_rows(skeleton, frame, &result.pose));
     let mesh = model.pose(&result.pose);
-    let measured = checks.measured(&mesh, &observed.vertices, settings.fit.health.surface_reach);
-    let mut health = frame_health(inputs, model, frame, &result.pose, previous_pose, &measured)?;
+    let iou = checks.ious(
+        &mesh,
+        &observed.vertices,
+        settings.fit.health.surface_reach,
+        &inputs.sequence.cameras,
+        &inputs.silhouettes(frame)?,
+    );
+    let motion = previous_pose.map_or(0.0, |before| {
+        crate::fit::joint_motion(model, before, &result.pose)
+    });
+    let mut health = crate::fit::health::summarize(&iou, motion);
     health.interpenetration = checks
         .capsules
         .deepest(model, &result.pose)
@@ -530,24 +534,6 @@ fn fitted_frame(
         state: state.clone(),
     };
     Ok((Produced::new(artifact, warnings), state))
-}
-
-/// A fitted frame's health: the posed model (`mesh`, coarse, moved onto the observed
-/// surface within `fit.health.surface_reach`) against the frame's silhouettes, and its
-/// joints' motion from the previous tracked frame's pose.
-fn frame_health(
-    inputs: &Inputs,
-    model: &BodyModel,
-    frame: u32,
-    pose: &Pose,
-    previous_pose: Option<&Pose>,
-    mesh: &crate::geometry::TriMesh,
-) -> Result<crate::fit::health::Health> {
-    use crate::fit::health;
-    let masks = inputs.silhouettes(frame)?;
-    let iou = health::silhouette_iou(&inputs.sequence.cameras, &masks, mesh);
-    let motion = previous_pose.map_or(0.0, |before| crate::fit::joint_motion(model, before, pose));
-    Ok(health::summarize(&iou, motion))
 }
 
 /// Concatenates the frames' artifacts into the output folder: joints.csv, poses.csv and
