@@ -36,6 +36,8 @@ pub struct Sequence {
     pub warnings: Vec<String>,
     /// Read as if it had no skeleton.yaml (`pipeline skeleton --force` replacing one).
     pub skeleton_ignored: bool,
+    /// Cameras whose video frames are not decoded yet (opened without decoding).
+    pub undecoded: Vec<String>,
     /// The key of the background plates learned from the frames
     /// ([`crate::artifacts::learned_background`]), once learned (`silhouette.method:
     /// learned`).
@@ -64,6 +66,32 @@ pub struct VideoOptions {
     pub offsets: std::collections::BTreeMap<String, i64>,
     /// The pipeline file, named in messages about `sync.offsets`.
     pub config_path: PathBuf,
+    /// The capture frames a run reads, `first..=last` (its selected frames, pipeline.yaml's
+    /// and the skeleton's reference frame): only these are decoded, and a camera may lack
+    /// frames outside them. `None`: every frame.
+    pub window: Option<(u32, u32)>,
+    /// Whether frames missing from the cache are decoded now (false for read-only
+    /// commands: [`Sequence::undecoded`] names the cameras left undecoded).
+    pub decode: bool,
+}
+
+/// The video frames to decode for the capture frames `window` (`None`: all) of a camera
+/// whose capture frame f is its video frame f + `offset`, in a video of `frames` frames.
+fn video_window(
+    window: Option<(u32, u32)>,
+    offset: i64,
+    frames: u32,
+) -> std::ops::RangeInclusive<u32> {
+    let (lo, hi) = match window {
+        Some((a, b)) => (a as i64 + offset, b as i64 + offset),
+        None => (offset, i64::MAX),
+    };
+    let (lo, hi) = (lo.max(0), hi.min(frames as i64 - 1));
+    if hi < lo {
+        #[allow(clippy::reversed_empty_ranges)]
+        return 1..=0;
+    }
+    lo as u32..=hi as u32
 }
 
 /// The name of frame `index`'s files: the zero-padded six-digit index.
@@ -242,7 +270,7 @@ impl Sequence {
         // (or found decoded) in parallel below.
         let mut video_cams: Vec<(usize, PathBuf)> = Vec::new();
         for (i, cam) in cameras.iter().enumerate().filter(|_| has_frames) {
-            let Some(video) = crate::video::find(&frames_dir, &cam.name) else {
+            let Some(video) = crate::video::find(&frames_dir, &cam.name)? else {
                 continue;
             };
             let folder = frames_dir.join(&cam.name);
@@ -266,12 +294,41 @@ impl Sequence {
                 ));
             };
             use rayon::prelude::*;
+            // Every video is probed (and refused by name) before any is decoded.
+            let probes: Vec<crate::video::Probe> = video_cams
+                .par_iter()
+                .map(|(i, path)| crate::video::probe_for(path, &cameras[*i]))
+                .collect::<Result<_>>()?;
+            for ((i, path), probe) in video_cams.iter().zip(&probes) {
+                if probe.rotation != 0.0 {
+                    warnings.push(format!(
+                        "{}: the video asks players to turn it by {} degrees; camera {}'s \
+                         frames are used as stored ({}x{}, as calibrated), not turned",
+                        crate::text::shown_path(path),
+                        probe.rotation,
+                        crate::text::quoted(&cameras[*i].name),
+                        probe.width,
+                        probe.height
+                    ));
+                }
+            }
             let progress = crate::video::progress();
             let done: Vec<Result<(usize, crate::video::Decoded)>> = video_cams
                 .par_iter()
-                .map(|(i, path)| {
-                    crate::video::decoded(path, &cameras[*i], &v.decoded_root, &progress)
-                        .map(|d| (*i, d))
+                .zip(probes)
+                .map(|((i, path), probe)| {
+                    let offset = v.offsets.get(&cameras[*i].name).copied().unwrap_or(0);
+                    let window = video_window(v.window, offset, probe.frames);
+                    crate::video::decoded(
+                        path,
+                        probe,
+                        &cameras[*i],
+                        &v.decoded_root,
+                        window,
+                        v.decode,
+                        &progress,
+                    )
+                    .map(|d| (*i, d))
                 })
                 .collect();
             progress.finish_and_clear();
@@ -281,6 +338,10 @@ impl Sequence {
                 decoded[i] = Some((d, offset));
             }
         }
+        let window = videos
+            .and_then(|v| v.window)
+            .filter(|_| !video_cams.is_empty());
+        let mut undecoded = Vec::new();
         if let Some(v) = videos {
             for (name, _) in v.offsets.iter().filter(|(_, &o)| o != 0) {
                 let i = cameras
@@ -302,12 +363,19 @@ impl Sequence {
             if let Some((d, offset)) = &decoded[ci] {
                 // The capture's frames f with 0 <= f + offset < the video's frame count.
                 let first = (-offset).max(0);
-                let end = d.info.frames as i64 - offset;
-                per_camera.push(
-                    (first..end.max(first))
-                        .filter_map(|f| u32::try_from(f).ok().map(|f| (f, "png")))
-                        .collect(),
-                );
+                let end = d.probe.frames as i64 - offset;
+                let list: Vec<(u32, &'static str)> = (first..end.max(first))
+                    .filter_map(|f| u32::try_from(f).ok().map(|f| (f, "png")))
+                    .filter(|&(f, _)| window.is_none_or(|(a, b)| (a..=b).contains(&f)))
+                    .collect();
+                let held = |&(f, _): &(u32, &str)| {
+                    let v = u32::try_from(f as i64 + offset).unwrap_or(u32::MAX);
+                    d.decoded.contains(&v)
+                };
+                if !list.iter().all(held) {
+                    undecoded.push(cam.name.clone());
+                }
+                per_camera.push(list);
                 continue;
             }
             let cam_dir = frames_dir.join(&cam.name);
@@ -321,7 +389,9 @@ impl Sequence {
                     ),
                 ));
             }
-            per_camera.push(list_frames(&cam_dir, &mut warnings)?);
+            let mut list = list_frames(&cam_dir, &mut warnings)?;
+            list.retain(|&(f, _)| window.is_none_or(|(a, b)| (a..=b).contains(&f)));
+            per_camera.push(list);
         }
         let all: BTreeSet<u32> = per_camera.iter().flatten().map(|&(i, _)| i).collect();
         if all.is_empty() {
@@ -345,13 +415,13 @@ impl Sequence {
                     return Err(Error::invalid(
                         &d.video,
                         format!(
-                            "camera '{}': the video holds {} frames (capture frames {}, with \
+                            "camera {}: the video holds {} frames (capture frames {}, with \
                              offset {offset}) but other cameras have frames {}: frame \
                              {missing} is missing. A camera that started late or stopped \
                              early needs sync.offsets in pipeline.yaml, or trim the other \
                              videos",
-                            cam.name,
-                            d.info.frames,
+                            crate::text::quoted(&cam.name),
+                            d.probe.frames,
                             if have.is_empty() {
                                 "none".to_string()
                             } else {
@@ -411,6 +481,7 @@ impl Sequence {
             has_backgrounds,
             warnings,
             skeleton_ignored: false,
+            undecoded,
             learned_plates: None,
         };
         seq.check_image_sizes()?;
@@ -449,8 +520,9 @@ impl Sequence {
         use rayon::prelude::*;
         let mut jobs: Vec<(usize, PathBuf)> = Vec::new();
         for (c, cam) in self.cameras.iter().enumerate() {
+            let undecoded = self.undecoded.contains(&cam.name);
             for &f in &self.frames {
-                if self.has_frames {
+                if self.has_frames && !undecoded {
                     jobs.push((c, self.frame_path(c, f)));
                 }
                 if self.has_masks {
@@ -524,25 +596,33 @@ impl Sequence {
             .filter_map(|(s, cam)| match s {
                 FrameSource::Folder(_) => None,
                 FrameSource::Video { decoded, offset } => Some(format!(
-                    "{}: {} holds {} frames, {}x{} (calibrated {}x{}), {}, offset {offset}; \
-                     {} {}",
-                    cam.name,
-                    decoded.video.display(),
-                    decoded.info.frames,
-                    decoded.info.width,
-                    decoded.info.height,
+                    "{}: {} holds {} frames, {}x{} (calibrated {}x{}), {}, offset {offset}; {}",
+                    crate::text::escape_controls(&cam.name),
+                    crate::text::shown_path(&decoded.video),
+                    decoded.probe.frames,
+                    decoded.probe.width,
+                    decoded.probe.height,
                     cam.width,
                     cam.height,
                     decoded
-                        .info
+                        .probe
                         .rate
                         .map_or("rate not stated".to_string(), |r| format!("{r:.3} fps")),
-                    if decoded.fresh {
-                        "decoded into"
+                    if decoded.decoded.is_empty() {
+                        "not decoded yet (decoded by `pipeline run`)".to_string()
                     } else {
-                        "decoded frames reused from"
-                    },
-                    decoded.dir.display()
+                        format!(
+                            "video frames {}..{} {} {}",
+                            decoded.decoded.start,
+                            decoded.decoded.end - 1,
+                            if decoded.fresh {
+                                "decoded into"
+                            } else {
+                                "decoded earlier, reused from"
+                            },
+                            crate::text::shown_path(&decoded.dir)
+                        )
+                    }
                 )),
             })
             .collect()
@@ -556,12 +636,12 @@ impl Sequence {
             .zip(&self.cameras)
             .filter_map(|(s, cam)| match s {
                 FrameSource::Video { decoded, offset } => {
-                    let end = decoded.info.frames as i64 - 1 - offset;
+                    let end = decoded.probe.frames as i64 - 1 - offset;
                     (end < last as i64).then(|| {
                         format!(
-                            "camera '{}': {} ends at capture frame {end}",
-                            cam.name,
-                            decoded.video.display()
+                            "camera {}: {} ends at capture frame {end}",
+                            crate::text::quoted(&cam.name),
+                            crate::text::shown_path(&decoded.video)
                         )
                     })
                 }

@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// The file could not be read or written.
-    #[error("{}: {err}", path.display())]
+    #[error("{}: {err}", crate::text::shown_path(path))]
     Io { path: PathBuf, err: std::io::Error },
     /// The file was read but its content is invalid (bad YAML, bad values, bad layout).
-    #[error("{}: {msg}", path.display())]
+    #[error("{}: {msg}", crate::text::shown_path(path))]
     Invalid { path: PathBuf, msg: String },
     /// A problem not tied to one file (bad command-line argument, inconsistent options).
     #[error("{0}")]

@@ -36,6 +36,7 @@ pub mod skeleton;
 pub mod slurm;
 pub mod stages;
 pub mod synth;
+pub mod text;
 pub mod video;
 pub mod yaml;
 

@@ -597,7 +597,11 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             println!("wrote {}", out.display());
         }
         Command::Status { file, frames } => {
-            let job = Job::load(Config::load(&file)?, frames)?;
+            // Read-only: decodes nothing, learns nothing, writes nothing.
+            let job = Job::load_read_only(Config::load(&file)?, frames)?;
+            for note in &job.pending {
+                println!("note: {note}; every stage counts as missing");
+            }
             println!(
                 "{:>12}  {:>10}  {:>6}  {:>7}",
                 "stage", "up to date", "stale", "missing"

@@ -56,6 +56,9 @@ pub struct Job {
     pub cache: Cache,
     /// Method `learned`: what learning the plates did (one line for the summary).
     pub learning: Option<String>,
+    /// What a read-only load left uncomputed ([`Job::load_read_only`]): while any is
+    /// left, no stage's key can be known.
+    pub pending: Vec<String>,
 }
 
 impl Job {
@@ -68,15 +71,49 @@ impl Job {
             frames,
             cache: self.cache.clone(),
             learning: self.learning.clone(),
+            pending: self.pending.clone(),
         }
     }
 
-    /// Loads pipeline.yaml's capture and selects frames (`frames` overrides the file's).
+    /// Loads pipeline.yaml's capture and selects frames (`frames` overrides the file's),
+    /// decoding the camera videos' frames it reads and learning background plates when
+    /// the silhouettes need them.
     pub fn load(config: Config, frames: Option<FrameRange>) -> Result<Job> {
+        Self::open(config, frames, true)
+    }
+
+    /// As [`Job::load`], but writing nothing to the cache (for `pipeline status`): video
+    /// frames not decoded yet and plates not learned yet are left so, and named in
+    /// [`Job::pending`].
+    pub fn load_read_only(config: Config, frames: Option<FrameRange>) -> Result<Job> {
+        Self::open(config, frames, false)
+    }
+
+    fn open(config: Config, frames: Option<FrameRange>, compute: bool) -> Result<Job> {
+        // The frames this job reads: the selected ones, pipeline.yaml's (the learned plates
+        // come from those) and the skeleton's reference frame (tracking starts there).
+        let window = match frames.or(config.frames) {
+            None => None,
+            Some(r) => {
+                let mut ends = vec![r.first, r.last];
+                if let Some(c) = config.frames {
+                    ends.extend([c.first, c.last]);
+                }
+                let skeleton = config.sequence.join("skeleton.yaml");
+                if let Ok(t0) =
+                    crate::skeleton::Skeleton::read(&skeleton).map(|s| s.reference_frame)
+                {
+                    ends.push(t0);
+                }
+                Some((*ends.iter().min().unwrap(), *ends.iter().max().unwrap()))
+            }
+        };
         let videos = crate::dataset::VideoOptions {
             decoded_root: config.cache.join("decoded"),
             offsets: config.sync.offsets.clone(),
             config_path: config.path.clone(),
+            window,
+            decode: compute,
         };
         let sequence = Sequence::open_with_videos(&config.calibration, &config.sequence, &videos)?;
         let range = frames.or(config.frames);
@@ -111,7 +148,31 @@ impl Job {
         let mut sequence = sequence;
         // The learned plates come from pipeline.yaml's frames, whatever this job computes,
         // so that a shard or a single frame sees the plates a whole run sees.
-        let learning = crate::stages::silhouette::learn_plates(&config, &sequence, &cache)?;
+        let mut pending: Vec<String> = sequence
+            .undecoded
+            .iter()
+            .map(|c| {
+                format!(
+                    "camera {}'s video frames are not decoded yet (`pipeline run` decodes them)",
+                    crate::text::quoted(c)
+                )
+            })
+            .collect();
+        let learning = if pending.is_empty() {
+            crate::stages::silhouette::learn_plates(&config, &sequence, &cache, compute)?
+        } else {
+            None
+        };
+        if !compute
+            && learning.is_none()
+            && crate::stages::silhouette::resolve_method(&config, &sequence)?
+                == crate::recon::silhouette::SilhouetteMethod::Learned
+            && pending.is_empty()
+        {
+            pending.push(
+                "the background plates are not learned yet (`pipeline run` learns them)".into(),
+            );
+        }
         sequence.learned_plates = learning.as_ref().map(|l| l.key.clone());
         Ok(Job {
             config,
@@ -121,6 +182,7 @@ impl Job {
             learning: learning
                 .as_ref()
                 .map(crate::stages::silhouette::learning_report),
+            pending,
         })
     }
 
@@ -714,6 +776,18 @@ impl StageRun<'_> {
 /// How many selected frames of each stage are up to date, stale or missing.
 pub fn status(job: &Job) -> Result<Vec<StageStatus>> {
     let reference = job.reference_frame()?;
+    if !job.pending.is_empty() {
+        // Nothing computed from frames not decoded (or plates not learned) can be current.
+        return Ok(STAGES
+            .iter()
+            .map(|s| StageStatus {
+                stage: s.name,
+                up_to_date: 0,
+                stale: 0,
+                missing: job.stage_frames(s, reference).len(),
+            })
+            .collect());
+    }
     let keys = job.keys(reference)?;
     Ok(STAGES
         .iter()

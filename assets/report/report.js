@@ -204,8 +204,10 @@
     const h = healthByFrame.get(f);
     el('frame-label').textContent = 'frame ' + f + (f === data.t0 ? ' (reference)' : '') +
       (h ? ' \u00b7 IoU worst ' + h.iou_worst + ' (' + h.iou_worst_camera + ')' + (h.flags ? ' \u00b7 ' + h.flags : '') : '');
-    if (data.overlayCameras.length) el('overlay').src = '../export/overlays/' + cameraSelect.value + '/' + pad(f) + '.png';
-    if (data.contact) el('contact').src = '../export/overlays/contact/' + pad(f) + '.png';
+    // A camera's name is one path segment, percent-encoded: '#', '?', '%' and '..' in a
+    // name never change which file is linked.
+    if (data.overlayCameras.length) el('overlay').src = '../export/overlays/' + encodeURIComponent(cameraSelect.value) + '/' + pad(f) + '.png';
+    if (data.contact) el('contact').src = '../export/contact_sheets/' + pad(f) + '.png';
     document.querySelectorAll('.cursor').forEach((line) => {
       line.setAttribute('x1', line.dataset.x0 * 1 + line.dataset.step * current);
       line.setAttribute('x2', line.dataset.x0 * 1 + line.dataset.step * current);

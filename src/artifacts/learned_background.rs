@@ -3,12 +3,14 @@
 //! frames pipeline.yaml selects, and read by every frame's silhouettes.
 //!
 //! Files, under `<cache>/learned_background/<key>/` (the key: what the plates are learned
-//! from, [`key`]): per camera `<camera>.png` (the steady colour, RGB), `<camera>.share.png`
-//! (the share of the frames that showed it, grey, 255 = every frame),
-//! `<camera>.subject.png` (255 where the steady colour is the subject's) and
-//! `<camera>.chroma.png` (24 x 24, 255 where a chromaticity bin is more the subject's than
-//! the room's); then `learned.yaml` (the frames used and each camera's shares), written
-//! last: the plates are complete exactly when it exists. Each file is written atomically.
+//! from, [`key`]): per camera a folder `cameras/<camera>/` (no camera name can collide with
+//! another's files) holding `plate.png` (the steady colour, RGB), `share.png` (the share of
+//! the frames that showed it, grey, 255 = every frame), `subject.png` (255 where the steady
+//! colour is the subject's) and `chroma.png` (24 x 24, 255 where a chromaticity bin is more
+//! the subject's than the room's); then `learned.yaml` (the frames used, each camera's
+//! shares, and every file's size and hash), written last: the plates are complete exactly
+//! when it exists and every file matches it; damaged plates are learned again. Each file
+//! is written atomically.
 
 use crate::cache::{Cache, KeyBuilder};
 use crate::camera::Camera;
@@ -23,7 +25,7 @@ use std::path::{Path, PathBuf};
 pub const FOLDER: &str = "learned_background";
 
 /// Bumped whenever the learning or the files change.
-const FORMAT_VERSION: u32 = 2;
+const FORMAT_VERSION: u32 = 3;
 
 /// What `learned.yaml` records.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -33,6 +35,20 @@ pub struct LearnedInfo {
     pub frames: Vec<u32>,
     /// Per camera, in calibration order.
     pub cameras: Vec<CameraShares>,
+    /// Every plate file as written (path under the plates' folder, size, hash).
+    #[serde(default)]
+    pub files: Vec<FileRecord>,
+}
+
+/// One file of the plates as written.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FileRecord {
+    /// Under the plates' folder, `/`-separated.
+    pub path: String,
+    pub bytes: u64,
+    /// BLAKE3, hex.
+    pub blake3: String,
 }
 
 /// What one camera's learning found, as shares of its pixels (0..1).
@@ -80,9 +96,27 @@ fn info_path(dir: &Path) -> PathBuf {
     dir.join("learned.yaml")
 }
 
-/// The record of complete plates with `key`, if they exist.
+/// The record of complete plates with `key`, if they exist and every file is as written
+/// (a damaged set is removed, to be learned again).
 pub fn existing(cache: &Cache, key: &str) -> Option<LearnedInfo> {
-    crate::yaml::read(&info_path(&dir(cache, key))).ok()
+    let dir = dir(cache, key);
+    let info: LearnedInfo = crate::yaml::read(&info_path(&dir)).ok()?;
+    let intact = !info.files.is_empty()
+        && info.files.iter().all(|f| {
+            std::fs::read(dir.join(&f.path)).is_ok_and(|bytes| {
+                bytes.len() as u64 == f.bytes && blake3::hash(&bytes).to_hex().as_str() == f.blake3
+            })
+        });
+    if !intact {
+        let _ = std::fs::remove_file(info_path(&dir));
+        return None;
+    }
+    Some(info)
+}
+
+/// Camera `cam`'s file `name` under the plates' folder, `/`-separated.
+fn camera_file(cam: &Camera, name: &str) -> String {
+    format!("cameras/{}/{name}", cam.name)
 }
 
 /// A 0/255 image of `flags` (row-major, `w` x `h`).
@@ -104,10 +138,12 @@ pub fn write(
     info: &LearnedInfo,
 ) -> Result<()> {
     let dir = dir(cache, key);
+    // A damaged earlier set is replaced whole.
+    let _ = std::fs::remove_file(info_path(&dir));
     crate::fsutil::create_dir_all(&dir)?;
+    let mut files = Vec::new();
     for (cam, l) in cameras.iter().zip(learned) {
         let (w, h) = l.plate.dimensions();
-        crate::imageio::write_rgb(&dir.join(format!("{}.png", cam.name)), &l.plate)?;
         let share = GrayImage::from_raw(
             w,
             h,
@@ -117,18 +153,37 @@ pub fn write(
                 .collect(),
         )
         .expect("one share per pixel");
-        crate::imageio::write_gray(&dir.join(format!("{}.share.png", cam.name)), &share)?;
-        crate::imageio::write_gray(
-            &dir.join(format!("{}.subject.png", cam.name)),
-            &flags_image(w, h, &l.steady_subject),
-        )?;
         let bins = CHROMA_BINS as u32;
-        crate::imageio::write_gray(
-            &dir.join(format!("{}.chroma.png", cam.name)),
-            &flags_image(bins, bins, &l.subject_chroma),
-        )?;
+        let images = [
+            ("plate.png", image::DynamicImage::ImageRgb8(l.plate.clone())),
+            ("share.png", image::DynamicImage::ImageLuma8(share)),
+            (
+                "subject.png",
+                image::DynamicImage::ImageLuma8(flags_image(w, h, &l.steady_subject)),
+            ),
+            (
+                "chroma.png",
+                image::DynamicImage::ImageLuma8(flags_image(bins, bins, &l.subject_chroma)),
+            ),
+        ];
+        for (name, img) in images {
+            let rel = camera_file(cam, name);
+            let path = dir.join(&rel);
+            match &img {
+                image::DynamicImage::ImageRgb8(rgb) => crate::imageio::write_rgb(&path, rgb)?,
+                other => crate::imageio::write_gray(&path, &other.to_luma8())?,
+            }
+            let bytes = std::fs::read(&path).map_err(|e| crate::error::Error::io(&path, e))?;
+            files.push(FileRecord {
+                path: rel,
+                bytes: bytes.len() as u64,
+                blake3: blake3::hash(&bytes).to_hex().to_string(),
+            });
+        }
     }
-    let text = crate::yaml::to_string(info)?;
+    let mut info = info.clone();
+    info.files = files;
+    let text = crate::yaml::to_string(&info)?;
     crate::fsutil::write_atomic(&info_path(&dir), text.as_bytes())
 }
 
@@ -136,7 +191,7 @@ pub fn write(
 pub fn read(cache: &Cache, key: &str, cam: &Camera) -> Result<Learned> {
     let dir = dir(cache, key);
     let grey = |suffix: &str, expected: Option<&Camera>| -> Result<Vec<u8>> {
-        let path = dir.join(format!("{}.{suffix}", cam.name));
+        let path = dir.join(camera_file(cam, suffix));
         let img = crate::dataset::decode(&path, expected)?.into_luma8();
         if expected.is_none() && img.dimensions() != (CHROMA_BINS as u32, CHROMA_BINS as u32) {
             return Err(crate::error::Error::invalid(
@@ -147,7 +202,7 @@ pub fn read(cache: &Cache, key: &str, cam: &Camera) -> Result<Learned> {
         Ok(img.into_raw())
     };
     let plate =
-        crate::dataset::decode(&dir.join(format!("{}.png", cam.name)), Some(cam))?.into_rgb8();
+        crate::dataset::decode(&dir.join(camera_file(cam, "plate.png")), Some(cam))?.into_rgb8();
     let share = grey("share.png", Some(cam))?
         .into_iter()
         .map(|v| v as f32 / 255.0)

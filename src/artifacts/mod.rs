@@ -5,7 +5,7 @@
 //! | artifact | stage folder | files per frame |
 //! |---|---|---|
 //! | [`silhouettes`] | `silhouette` | `NNNNNN/<camera>.png` |
-//! | [`learned_background`] (method `learned`) | `learned_background/<key>` | per capture: `<camera>.png`, `<camera>.share.png`, `learned.yaml` |
+//! | [`learned_background`] (method `learned`) | `learned_background/<key>` | per capture: `cameras/<camera>/{plate,share,subject,chroma}.png`, `learned.yaml` (with every file's size and hash) |
 //! | [`reconstruction`] (hull) | `visual_hull` | `NNNNNN.ply`, `NNNNNN.grid`, `NNNNNN.band` |
 //! | [`reconstruction`] (refined) | `graphcut` | `NNNNNN.ply`, `NNNNNN.grid` |
 //! | [`observation`] | `reliability` | `NNNNNN.ply`, `NNNNNN.obs` |

@@ -7,7 +7,7 @@
 //! Layout under `<output>/export/`: `<sequence>.glb`, `<sequence>.bvh`, `<sequence>.trc`,
 //! `<sequence>.c3d`,
 //! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit) and
-//! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `overlays/contact/NNNNNN.png`.
+//! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `contact_sheets/NNNNNN.png`.
 
 pub mod bvh;
 pub mod gltf;

@@ -12,6 +12,10 @@ use image::RgbImage;
 use rayon::prelude::*;
 use std::path::Path;
 
+/// The folder of the contact sheets, beside `overlays/` under the export folder (not in
+/// it: a camera may be named anything, `contact` included).
+pub const CONTACT_SHEETS: &str = "contact_sheets";
+
 /// Width of one camera's tile in a contact sheet, pixels.
 const TILE_WIDTH: u32 = 320;
 
@@ -27,7 +31,8 @@ pub fn chosen_cameras(ctx: &Context) -> Result<Vec<usize>> {
         .collect()
 }
 
-/// Writes one frame's overlays of `pose` under `dir` (`images`: the frame's input images,
+/// Writes one frame's overlays of `pose` under `dir` (`<export>/overlays`; the contact
+/// sheet beside it, [`CONTACT_SHEETS`]) (`images`: the frame's input images,
 /// `chosen`: [`chosen_cameras`]); returns the number of files.
 pub fn frame(
     ctx: &Context,
@@ -65,7 +70,8 @@ pub fn frame(
             .map(|&c| format!("{} t{frame}", seq.cameras[c].name))
             .collect();
         let sheet = contact_sheet(&pictures, &labels, TILE_WIDTH);
-        crate::imageio::write_rgb(&dir.join("contact").join(format!("{stem}.png")), &sheet)?;
+        let sheets = dir.with_file_name(CONTACT_SHEETS);
+        crate::imageio::write_rgb(&sheets.join(format!("{stem}.png")), &sheet)?;
         files += 1;
     }
     Ok(files)

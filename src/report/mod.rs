@@ -188,7 +188,10 @@ pub fn write(job: &Job) -> Result<Written> {
         "t0": model.skeleton.reference_frame,
         "cameras": cameras.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
         "overlayCameras": overlay_cameras,
-        "contact": overlays.join("contact").is_dir(),
+        "contact": output
+            .join("export")
+            .join(crate::export::overlays::CONTACT_SHEETS)
+            .is_dir(),
         "bones": bones,
         "model": {"positions": positions, "indices": indices, "skin": skin, "colours": colours},
         "motion": per_frame.iter().map(|x| &x.0).collect::<Vec<_>>(),
@@ -276,9 +279,22 @@ fn coarse_surface(mesh: &TriMesh, c: &Matrix3<f64>) -> Value {
     json!({"v": v, "t": t})
 }
 
-/// JSON made safe inside `<script>`: no `</` that could close it, no `<!--`.
+/// JSON made safe inside `<script>`: every `<`, `>` and `&` written as its JSON escape
+/// (`\u003c`...), so that nothing in a name can close the element or open a comment, and
+/// the text stays valid JSON (U+2028 and U+2029 too, for older script parsers).
 fn script_safe(json: &str) -> String {
-    json.replace("</", "<\\/").replace("<!--", "<\\!--")
+    let mut out = String::with_capacity(json.len());
+    for c in json.chars() {
+        match c {
+            '<' => out.push_str("\\u003c"),
+            '>' => out.push_str("\\u003e"),
+            '&' => out.push_str("\\u0026"),
+            '\u{2028}' => out.push_str("\\u2028"),
+            '\u{2029}' => out.push_str("\\u2029"),
+            c => out.push(c),
+        }
+    }
+    out
 }
 
 fn html_escape(s: &str) -> String {

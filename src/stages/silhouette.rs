@@ -143,11 +143,13 @@ pub struct Learning {
 /// (`frames`, at most [`MAX_LEARNING_FRAMES`] of them, evenly spread), or finds them in the
 /// cache. `None` for the other methods. A camera with more than
 /// `silhouette.learned_max_undecided` of its pixels never showing a steady background is
-/// refused by name: it needs plates or masks.
+/// refused by name: it needs plates or masks. Without `compute`, plates not in the cache
+/// are left unlearned (`None`).
 pub fn learn_plates(
     config: &Config,
     seq: &Sequence,
     cache: &crate::cache::Cache,
+    compute: bool,
 ) -> Result<Option<Learning>> {
     if resolve_method(config, seq)? != SilhouetteMethod::Learned {
         return Ok(None);
@@ -177,6 +179,9 @@ pub fn learn_plates(
             info,
             computed: false,
         }));
+    }
+    if !compute {
+        return Ok(None);
     }
     // On stderr, hidden when that is not a terminal.
     let bar = indicatif::ProgressBar::new(seq.cameras.len() as u64);
@@ -209,6 +214,7 @@ pub fn learn_plates(
     let info = LearnedInfo {
         frames,
         cameras: shares,
+        files: Vec::new(),
     };
     // Refused before anything is written: a rerun refuses again, by name.
     refuse_undecided(config, &info)?;

@@ -343,7 +343,7 @@ fn overlays_and_contact_sheets_are_written() {
         changed > 200,
         "skeleton and outline drawn: {changed} pixels"
     );
-    let sheet = image::open(dir.join("output/export/overlays/contact/000002.png")).unwrap();
+    let sheet = image::open(dir.join("output/export/contact_sheets/000002.png")).unwrap();
     // Frames narrower than a tile keep their size.
     assert!(sheet.width() > 4 * 256 && sheet.height() > 3 * 192);
 }

@@ -98,13 +98,13 @@ fn a_walking_subject_gets_masks_as_good_as_from_true_plates_without_any() {
     assert_eq!(plates.len(), 1);
     let plates = plates[0].path();
     for c in 0..8 {
-        let learned = image::open(plates.join(format!("cam{c:02}.png")))
+        let learned = image::open(plates.join(format!("cameras/cam{c:02}/plate.png")))
             .unwrap()
             .to_rgb8();
         let truth = image::open(seq.join(format!("background/cam{c:02}.png")))
             .unwrap()
             .to_rgb8();
-        let share = grey(&plates.join(format!("cam{c:02}.share.png")));
+        let share = grey(&plates.join(format!("cameras/cam{c:02}/share.png")));
         let (mut sum, mut n) = (0.0, 0usize);
         for ((l, t), s) in learned.pixels().zip(truth.pixels()).zip(share.pixels()) {
             if s.0[0] >= 128 {

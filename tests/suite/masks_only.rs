@@ -63,8 +63,6 @@ fn a_masks_only_humanoid_is_tracked_within_a_centimetre() {
         ("held by silhouettes", "")
     );
     // The exports draw on the masks in place of frames.
-    assert!(d
-        .join("output/export/overlays/contact/000005.png")
-        .is_file());
+    assert!(d.join("output/export/contact_sheets/000005.png").is_file());
     assert!(d.join("output/export/humanoid.bvh").is_file());
 }

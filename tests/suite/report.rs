@@ -6,6 +6,9 @@
 //! the 3D view is unavailable and the rest works. The browser checks are skipped with a note
 //! when a browser or puppeteer-core is missing, and required with `HULLPOSE_EXTERNAL_CHECKS=1`
 //! (as CI sets).
+//!
+//! The sample's first camera is renamed `c<!--#1?x%2e` and pipeline.yaml carries a comment
+//! with `<!--`: the page's data stays valid JSON and the overlay link finds its file.
 
 use crate::common;
 
@@ -13,12 +16,43 @@ use common::*;
 use std::path::Path;
 use std::process::Command;
 
+/// A camera name that breaks a page whose data is escaped wrongly (`<!--` in a script
+/// element) or whose links are joined as text (`#`, `?`, `%2e`).
+const HOSTILE_CAMERA: &str = "c<!--#1?x%2e";
+
+/// Renames camera `from` of the sample in `d` to `to`: the calibration, its frame and mask
+/// folders and its background plate.
+fn rename_camera(d: &Path, from: &str, to: &str) {
+    let calib = d.join("calib/cameras.yaml");
+    let text = std::fs::read_to_string(&calib).unwrap();
+    let quoted = serde_json::to_string(to).unwrap();
+    std::fs::write(
+        &calib,
+        text.replace(&format!("name: {from}\n"), &format!("name: {quoted}\n")),
+    )
+    .unwrap();
+    let seq = d.join("data/tripod");
+    for folder in ["frames", "masks"] {
+        if seq.join(folder).join(from).exists() {
+            std::fs::rename(seq.join(folder).join(from), seq.join(folder).join(to)).unwrap();
+        }
+    }
+    let plate = seq.join(format!("background/{from}.png"));
+    if plate.exists() {
+        std::fs::rename(plate, seq.join(format!("background/{to}.png"))).unwrap();
+    }
+}
+
 #[test]
 fn the_report_opens_from_disk_draws_the_model_and_follows_the_slider() {
     let dir = process_tempdir();
     let d = dir.path();
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
     copy_sample(d);
+    rename_camera(d, "cam00", HOSTILE_CAMERA);
+    let yaml = d.join("pipeline.yaml");
+    let text = std::fs::read_to_string(&yaml).unwrap();
+    std::fs::write(&yaml, format!("# old <!-- see wiki -->\n{text}")).unwrap();
 
     // Before a run there is nothing to show: one clear error, nothing written.
     let (ok, _, err) = run_cli(&["report", "pipeline.yaml"], d);
@@ -44,6 +78,13 @@ fn the_report_opens_from_disk_draws_the_model_and_follows_the_slider() {
     );
     assert!(!page.contains("type=\"module\""));
     assert!(page.contains("Three.js Authors") && page.contains("SPDX-License-Identifier: MIT"));
+    // The data element holds no `<` at all (every one escaped as \u003c) and parses as JSON.
+    let start = page.find("id=\"report-data\"").expect("the data element");
+    let body = &page[page[start..].find('>').unwrap() + start + 1..];
+    let json = &body[..body.find("</script>").unwrap()];
+    assert!(!json.contains('<'), "unescaped < in the page's data");
+    let data: serde_json::Value = serde_json::from_str(json).expect("the page's data is JSON");
+    assert_eq!(data["cameras"][0], HOSTILE_CAMERA);
     // The evaluation's tables and the fit's health are in it.
     assert!(page.contains("joint_error.csv") && page.contains("iou_worst"));
 
