@@ -255,9 +255,15 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
     let up = crate::geometry::axes::up_vector(up);
     let candidates = match frame {
         Some(f) if !job.frames.contains(&f) => {
-            return Err(Error::Usage(format!(
-                "frame {f} is not among the sequence's frames"
-            )))
+            return Err(Error::Usage(
+                match (job.frames.first(), job.frames.last()) {
+                    (Some(a), Some(b)) => format!(
+                    "frame {f} is not among the frames selected ({a}..{b}, from pipeline.yaml's \
+                     `frames` and the capture); pick one of those, or widen `frames`"
+                ),
+                    _ => format!("frame {f} is not among the capture's frames"),
+                },
+            ))
         }
         Some(f) => vec![f],
         None => candidate_frames(&job.frames),

@@ -244,6 +244,18 @@ impl Camera {
             && px.y < self.height as f64 - 0.5
     }
 
+    /// The farthest image corner from the principal point, as a distorted normalized radius.
+    fn corner_radius(&self) -> f64 {
+        let (w, h) = (self.width as f64, self.height as f64);
+        [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
+            .iter()
+            .map(|&(x, y)| {
+                let ny = (y - self.cy) / self.fy;
+                Vector2::new((x - self.cx - self.skew * ny) / self.fx, ny).norm()
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// Where the radial distortion r (1 + k1 r^2 + k2 r^4 + k3 r^6) stops increasing before
     /// it reaches the image's corners (a lens model that folds the image onto itself), as
     /// the distorted normalized radius; `None` when it is one-to-one over the image.
@@ -252,14 +264,7 @@ impl Camera {
         if k1 >= 0.0 && k2 >= 0.0 && k3 >= 0.0 {
             return None;
         }
-        let (w, h) = (self.width as f64, self.height as f64);
-        let corner = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
-            .iter()
-            .map(|&(x, y)| {
-                let ny = (y - self.cy) / self.fy;
-                Vector2::new((x - self.cx - self.skew * ny) / self.fx, ny).norm()
-            })
-            .fold(0.0, f64::max);
+        let corner = self.corner_radius();
         let radial = |r: f64| r * (1.0 + r * r * (k1 + r * r * (k2 + r * r * k3)));
         let slope = |r: f64| {
             let r2 = r * r;
@@ -279,6 +284,56 @@ impl Camera {
         }
         // The corners are never reached: the distortion shrinks the image by 4x or more.
         Some(radial(4.0 * corner))
+    }
+
+    /// The share of the image (0..1) where the whole lens model (radial and tangential)
+    /// folds: sampled undistorted directions, out to where the radial part reaches the
+    /// image's corners, whose pixel lies in the image and where the Jacobian of
+    /// [`Camera::distort`] has a non-positive determinant (two directions meet there).
+    /// 0 for a one-to-one model.
+    fn folded_share(&self) -> f64 {
+        if !self.has_distortion() {
+            return 0.0;
+        }
+        let [k1, k2, _, _, k3] = self.dist;
+        let corner = self.corner_radius();
+        // The undistorted radius where the radial part first reaches the corners (the
+        // radial fold is refused on its own, [`Camera::fold_radius`]).
+        let radial = |r: f64| r * (1.0 + r * r * (k1 + r * r * (k2 + r * r * k3)));
+        let steps = 2000;
+        let reach = (1..=steps)
+            .map(|i| i as f64 * 4.0 * corner / steps as f64)
+            .find(|&r| radial(r) >= corner)
+            .unwrap_or(4.0 * corner);
+        let n = 96;
+        let (mut inside, mut folded) = (0usize, 0usize);
+        for j in 0..=n {
+            for i in 0..=n {
+                let u = Vector2::new(
+                    (2.0 * i as f64 / n as f64 - 1.0) * reach,
+                    (2.0 * j as f64 / n as f64 - 1.0) * reach,
+                );
+                if u.norm() > reach {
+                    continue;
+                }
+                let d = self.distort(u);
+                let px = Vector2::new(
+                    self.fx * d.x + self.skew * d.y + self.cx,
+                    self.fy * d.y + self.cy,
+                );
+                if !self.in_image(&px) {
+                    continue;
+                }
+                inside += 1;
+                if self.distort_jacobian(u).determinant() <= 0.0 {
+                    folded += 1;
+                }
+            }
+        }
+        if inside == 0 {
+            return 1.0;
+        }
+        folded as f64 / inside as f64
     }
 
     /// Checks the values a calibration must satisfy; the message names what is wrong.
@@ -356,6 +411,18 @@ impl Camera {
             )
             .into());
         }
+        let folded = self.folded_share();
+        if folded > 0.0 {
+            return Err(format!(
+                "dist {:?} folds the image: over {:.0}% of it the lens model (radial and \
+                 tangential terms together) turns back on itself, so two directions would meet \
+                 at one pixel; check the coefficients and their order [k1, k2, p1, p2, k3] \
+                 (tangential terms p1, p2 are small, typically under 0.01)",
+                self.dist,
+                (100.0 * folded).max(1.0)
+            )
+            .into());
+        }
         let ortho = (self.r * self.r.transpose() - Matrix3::identity())
             .abs()
             .max();
@@ -398,12 +465,31 @@ pub struct Calibration {
 /// The longest camera or bone name, bytes.
 pub const MAX_NAME_BYTES: usize = 100;
 
-/// Unicode format characters that render as nothing or reorder text (bidirectional
-/// overrides and isolates, zero-width characters, the byte-order mark, soft hyphen).
+/// Characters that render as nothing or reorder text: Unicode's default-ignorable code
+/// points (bidirectional overrides and isolates, zero-width characters, the byte-order
+/// mark, soft hyphen, variation selectors, the combining grapheme joiner, Hangul and
+/// Khmer fillers, tags) and the interlinear annotation marks.
 fn invisible(c: char) -> bool {
     matches!(c,
-        '\u{00AD}' | '\u{061C}' | '\u{180E}' | '\u{200B}'..='\u{200F}' | '\u{202A}'..='\u{202E}'
-        | '\u{2060}'..='\u{2064}' | '\u{2066}'..='\u{206F}' | '\u{FEFF}' | '\u{FFF9}'..='\u{FFFB}')
+        '\u{00AD}' | '\u{034F}' | '\u{061C}' | '\u{115F}'..='\u{1160}' | '\u{17B4}'..='\u{17B5}'
+        | '\u{180B}'..='\u{180F}' | '\u{200B}'..='\u{200F}' | '\u{202A}'..='\u{202E}'
+        | '\u{2060}'..='\u{206F}' | '\u{3164}' | '\u{FE00}'..='\u{FE0F}' | '\u{FEFF}'
+        | '\u{FFA0}' | '\u{FFF0}'..='\u{FFFB}' | '\u{1BCA0}'..='\u{1BCA3}'
+        | '\u{1D173}'..='\u{1D17A}' | '\u{E0000}'..='\u{E0FFF}')
+}
+
+/// Characters that draw nothing though they are not invisible by class: white space and
+/// blank letters such as the braille blank U+2800.
+fn blank(c: char) -> bool {
+    c.is_whitespace() || matches!(c, '\u{2800}' | '\u{3000}')
+}
+
+/// The form in which two names are compared: NFC (so that "café" composed and decomposed
+/// are one name, as they are one folder on macOS), lower case (one folder on a
+/// case-insensitive filesystem).
+pub fn comparable_name(name: &str) -> String {
+    use unicode_normalization::UnicodeNormalization;
+    name.nfc().collect::<String>().to_lowercase()
 }
 
 /// Camera names become folder names: refuse anything that is not a plain file name.
@@ -428,6 +514,13 @@ pub fn check_name(name: &str) -> std::result::Result<(), Refusal> {
             "the name {:?} contains the invisible character U+{:04X}; use letters, digits, '_' \
              and '-'",
             name, c as u32
+        )
+        .into());
+    }
+    if name.chars().all(blank) {
+        return Err(format!(
+            "the name {:?} has no visible character; use letters, digits, '_' and '-'",
+            name
         )
         .into());
     }
@@ -485,10 +578,11 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
         check_name(&e.name).map_err(|m| bad(m.0))?;
         // Names become folder names: on a case-insensitive filesystem "Cam0" and "cam0"
         // would be one folder.
-        if !seen.insert(e.name.to_lowercase()) {
+        if !seen.insert(comparable_name(&e.name)) {
             return Err(bad(
-                "the name is used twice (or differs from another only by case); camera names \
-                 must be unique, also on case-insensitive filesystems"
+                "the name is used twice (or differs from another only by case or by Unicode \
+                 composition, as 'café' written two ways); camera names must be unique, also \
+                 on case-insensitive and normalizing filesystems"
                     .into(),
             ));
         }
@@ -572,7 +666,7 @@ pub fn cameras_to_yaml(cameras: &[Camera]) -> String {
     let mut s = String::from("cameras:\n");
     for c in cameras {
         let r = |i: usize| row([c.r[(i, 0)], c.r[(i, 1)], c.r[(i, 2)]]);
-        let _ = writeln!(s, "  - name: {:?}", c.name);
+        let _ = writeln!(s, "  - name: {}", crate::yaml::scalar(&c.name));
         let _ = writeln!(s, "    width: {}", c.width);
         let _ = writeln!(s, "    height: {}", c.height);
         let _ = writeln!(

@@ -369,13 +369,19 @@ impl Default for ExportParams {
 /// The animations' timing when `export.frame_rate` is unset, frames per second.
 pub const ANIMATION_RATE: f64 = 25.0;
 
+/// The frame rates `export.frame_rate` accepts, frames per second: outside, the exports'
+/// times print as 0 or as hundreds of digits.
+pub const MIN_FRAME_RATE: f64 = 0.01;
+pub const MAX_FRAME_RATE: f64 = 10_000.0;
+
 /// Checks the parameters; the message names the key.
 pub fn validate_export(p: &ExportParams) -> std::result::Result<(), Refusal> {
     if let Some(rate) = p.frame_rate {
-        if !(rate.is_finite() && rate > 0.0) {
+        if !(rate.is_finite() && (MIN_FRAME_RATE..=MAX_FRAME_RATE).contains(&rate)) {
             return Err(format!(
-                "key 'export.frame_rate': {rate} is not a positive number of frames per second \
-                 (leave it out when the capture's rate is unknown)"
+                "key 'export.frame_rate': {rate} is not a number of frames per second from \
+                 {MIN_FRAME_RATE} to {MAX_FRAME_RATE} (leave it out when the capture's rate is \
+                 unknown)"
             )
             .into());
         }

@@ -181,7 +181,7 @@ fn list_frames(dir: &Path, warnings: &mut Vec<String>) -> Result<Vec<(u32, &'sta
             Some((Some(i), ext)) => found.push((i, ext)),
             _ => warnings.push(format!(
                 "{}: not a frame file (NNNNNN.png), ignored",
-                path.display()
+                crate::text::shown_path(&path)
             )),
         }
     }

@@ -368,7 +368,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             let start = std::time::Instant::now();
             let job = Job::load(Config::load(&file)?, frames)?;
             for w in &job.sequence.warnings {
-                eprintln!("warning: {w}");
+                eprintln!("warning: {}", hullpose::text::escape_controls(w));
             }
             for line in job.sequence.video_report() {
                 println!("      videos: {line}");
@@ -394,7 +394,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
                     r.location.display()
                 );
                 for w in &r.warnings {
-                    eprintln!("warning: {w}");
+                    eprintln!("warning: {}", hullpose::text::escape_controls(w));
                 }
                 for o in &r.outputs {
                     println!("{:>12}  wrote {}", "", o.display());
@@ -424,7 +424,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             };
             let written = hullpose::export::from_cache(&job, &formats)?;
             for w in &written.warnings {
-                eprintln!("warning: {w}");
+                eprintln!("warning: {}", hullpose::text::escape_controls(w));
             }
             for o in &written.outputs {
                 println!("wrote {}", o.display());
@@ -677,7 +677,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
                 }
             };
             for w in &imported.warnings {
-                eprintln!("warning: {w}");
+                eprintln!("warning: {}", hullpose::text::escape_controls(w));
             }
             hullpose::camera::write_cameras(&out, &imported.cameras)?;
             println!(
@@ -759,8 +759,8 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             let job = Job::load(Config::load(&file)?, None)?;
             job.validate()?;
             let seq = &job.sequence;
-            for w in seq.warnings.iter().chain(&job.inspect_masks()?) {
-                eprintln!("warning: {w}");
+            for w in seq.warnings.iter().chain(&job.inspect_first_frame()?) {
+                eprintln!("warning: {}", hullpose::text::escape_controls(w));
             }
             let skeleton = seq.skeleton()?;
             let joints = seq.ground_truth_joints()?;

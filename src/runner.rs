@@ -48,6 +48,9 @@ pub struct StageStatus {
     pub missing: usize,
 }
 
+/// A carving box wider than this on some axis, metres, is more than one person.
+const PERSON_BOX_M: f64 = 3.0;
+
 /// A loaded sequence with the frames selected for a run.
 pub struct Job {
     pub config: Config,
@@ -217,6 +220,21 @@ impl Job {
         crate::recon::visual_hull::validate_for_cameras(&self.config.visual_hull, cameras.len())
             .map_err(|m| Error::invalid(&self.config.path, m))?;
         self.reference_frame()?;
+        if self
+            .config
+            .export
+            .formats
+            .contains(&crate::config::Format::C3d)
+        {
+            if let (Some(skeleton), Some(&first), Some(&last)) = (
+                self.sequence.skeleton()?,
+                self.frames.first(),
+                self.frames.last(),
+            ) {
+                crate::export::markers::check_c3d(&skeleton, first, last)
+                    .map_err(|m| Error::invalid(&self.config.path, m))?;
+            }
+        }
         for name in &self.config.export.overlay_cameras {
             self.sequence.camera_index(calibration, name).map_err(|e| {
                 Error::invalid(&self.config.path, format!("export.overlay_cameras: {e}"))
@@ -225,35 +243,60 @@ impl Job {
         Ok(())
     }
 
-    /// What the given masks of the first selected frame say before any stage runs (for
-    /// `pipeline check`): cameras whose mask is empty or covers the whole image. Refused
-    /// when every camera's mask covers the whole image (the hull would be the whole box).
-    pub fn inspect_masks(&self) -> Result<Vec<String>> {
+    /// What the first selected frame's silhouettes (computed as the silhouette stage
+    /// would, written nowhere) say before any stage runs (for `pipeline check`): cameras
+    /// whose silhouette is empty or covers the whole image, and the box the visual hull
+    /// would carve. Refused as `run` would refuse them: every camera's silhouette covering
+    /// the whole image (the hull would be the whole box), a carving grid over the memory
+    /// cap. Warned: a box far larger than a person.
+    pub fn inspect_first_frame(&self) -> Result<Vec<String>> {
         let seq = &self.sequence;
         let Some(&frame) = self.frames.first() else {
             return Ok(Vec::new());
         };
-        if !seq.has_masks {
-            return Ok(Vec::new());
-        }
-        let mut masks = Vec::with_capacity(seq.cameras.len());
-        for c in 0..seq.cameras.len() {
-            if let Some(m) = seq.load_mask(c, frame)? {
-                masks.push(m);
-            }
-        }
+        let masks = crate::stages::silhouette::frame_masks(&self.config, seq, &self.cache, frame)?;
+        let p = &self.config.visual_hull;
         let cov = crate::recon::silhouette::Coverage::of(&seq.cameras, &masks);
-        let full = cov.full_problem(frame, self.config.visual_hull.all_but, seq.cameras.len());
+        let full = cov.full_problem(frame, p.all_but, seq.cameras.len());
         let mut out: Vec<String> = full
-            .map_err(|m| Error::invalid(seq.dir.join("masks"), m))?
+            .map_err(|m| Error::invalid(&seq.dir, m))?
             .into_iter()
             .collect();
         if !cov.empty.is_empty() {
             out.push(format!(
-                "masks of frame {frame}: camera(s) {} hold no subject pixel, so that frame's hull \
-                 will be empty (masks are 255 or 1 on the subject, 0 elsewhere)",
+                "silhouettes of frame {frame}: camera(s) {} hold no subject pixel, so that \
+                 frame's hull will be empty (masks are 255 or 1 on the subject, 0 elsewhere)",
                 cov.empty.join(", ")
             ));
+            return Ok(out);
+        }
+        use crate::geometry::grid::GridSpec;
+        use crate::recon::visual_hull::{self, MaskCounts};
+        let counts: Vec<MaskCounts> = masks
+            .iter()
+            .zip(&seq.cameras)
+            .map(|(m, c)| MaskCounts::new(m, c))
+            .collect();
+        if let Some((lo, hi)) = visual_hull::carving_box(&seq.cameras, &counts, p) {
+            let grid = GridSpec::covering(lo, hi, p.voxel_size);
+            visual_hull::check_memory(&grid, p).map_err(|m| {
+                Error::invalid(
+                    &self.config.path,
+                    format!("frame {frame}'s box {:.2?} m: {m}", (hi - lo).as_slice()),
+                )
+            })?;
+            let extent = (hi - lo).max();
+            if p.bbox.is_none() && extent > PERSON_BOX_M {
+                out.push(format!(
+                    "frame {frame}: the box the silhouettes leave to carve is {:.1} x {:.1} x \
+                     {:.1} m, far larger than a person (over {PERSON_BOX_M} m): the masks mark \
+                     much of the room as the subject; check the silhouettes \
+                     (`pipeline view`), or set visual_hull.bbox",
+                    hi.x - lo.x,
+                    hi.y - lo.y,
+                    hi.z - lo.z
+                ));
+            }
         }
         Ok(out)
     }

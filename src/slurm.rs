@@ -169,7 +169,12 @@ pub fn plan(job: &Job, opts: &SlurmOptions) -> Result<Plan> {
              #SBATCH --output={}\n",
             opts.cpus,
             opts.time,
-            sbatch_quote(&dir.join(log).display().to_string())
+            // sbatch expands `%` patterns in --output: the folder's own `%` are doubled,
+            // the log name's pattern (`%A_%a`) is meant.
+            sbatch_quote(&format!(
+                "{}/{log}",
+                dir.display().to_string().replace('%', "%%")
+            ))
         );
         if let Some(p) = &opts.partition {
             h += &format!("#SBATCH --partition={}\n", sbatch_quote(p));

@@ -65,6 +65,8 @@ pub struct Probe {
     /// The display rotation the file asks players for, degrees (0: none). Frames are
     /// decoded as stored, without it.
     pub rotation: f64,
+    /// What ffprobe reported while reading the file, when it reported anything: damage.
+    pub damage: Option<String>,
 }
 
 /// One decoded frame file as written: its size in bytes and BLAKE3 hash (hex).
@@ -235,17 +237,10 @@ pub fn probe(video: &Path) -> Result<Probe> {
     if !out.status.success() {
         return Err(unreadable(complaint(&out.stderr)));
     }
-    if !out.stderr.trim_ascii().is_empty() {
-        // ffprobe succeeded but reported errors while reading every packet: the container
-        // is damaged or cut short (e.g. "File ended prematurely").
-        return Err(Error::invalid(
-            video,
-            format!(
-                "the file is damaged or cut short (ffprobe: {}); re-copy it from its source",
-                complaint(&out.stderr)
-            ),
-        ));
-    }
+    // ffprobe succeeded but reported errors while reading every packet (and decoding the
+    // first frames): the file is damaged or cut short ("File ended prematurely"). Kept for
+    // the decoding, which names the frame where it can.
+    let damage = (!out.stderr.trim_ascii().is_empty()).then(|| complaint(&out.stderr));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout)
         .map_err(|e| unreadable(format!("ffprobe's answer is not JSON: {e}")))?;
     let format = json["format"]["format_name"].as_str().unwrap_or("");
@@ -294,6 +289,7 @@ pub fn probe(video: &Path) -> Result<Probe> {
         rate,
         frames,
         rotation,
+        damage,
     })
 }
 
@@ -365,6 +361,9 @@ pub fn decoded(
     }
     let (first, last) = (*window.start(), *window.end());
     let dir = content_dir.join(format!("{first}-{last}"));
+    if let (Some(damage), false) = (&probe.damage, decode) {
+        return Err(damaged(video, damage, None));
+    }
     if !decode || window.is_empty() {
         return Ok(Decoded {
             video: video.to_path_buf(),
@@ -392,6 +391,10 @@ pub fn decoded(
     let _ = std::fs::remove_dir_all(&scratch.dir);
     crate::fsutil::create_dir_all(&scratch.dir)?;
     let files = decode_into(video, &probe, first, count, &scratch.dir, progress)?;
+    if let Some(damage) = &probe.damage {
+        // Damage the decoding of the selected frames did not meet (elsewhere in the file).
+        return Err(damaged(video, damage, None));
+    }
     let info = VideoInfo {
         first,
         frames: files.len() as u32,
@@ -697,16 +700,7 @@ fn decode_into(
         ));
     }
     if let Some(at) = first_error_at {
-        return Err(Error::invalid(
-            video,
-            format!(
-                "ffmpeg reports damage while decoding, near video frame {} (frames decoded \
-                 from it would hold concealed garbage): {}; re-copy the file from its source, \
-                 or trim the damaged part away (ffmpeg -ss/-to) and re-encode it",
-                first + at,
-                complaint(&stderr)
-            ),
-        ));
+        return Err(damaged(video, &complaint(&stderr), Some(first + at)));
     }
     if !status.success() {
         return Err(Error::invalid(
@@ -730,6 +724,20 @@ fn decode_into(
         ));
     }
     Ok(files)
+}
+
+/// The refusal of a video ffmpeg reports damage in (`complaint`), near video frame `frame`
+/// when the decoding could tell.
+fn damaged(video: &Path, complaint: &str, frame: Option<u32>) -> Error {
+    Error::invalid(
+        video,
+        format!(
+            "ffmpeg reports damage in the file{} (it is damaged or cut short; frames decoded \
+             from it would hold concealed garbage): {complaint}; re-copy the file from its \
+             source, or trim the damaged part away (ffmpeg -ss/-to) and re-encode it",
+            frame.map_or(String::new(), |f| format!(", near video frame {f}"))
+        ),
+    )
 }
 
 /// Reads one PPM header (`P6 <w> <h> <maxval>` and one whitespace byte) from ffmpeg's

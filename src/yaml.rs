@@ -81,6 +81,14 @@ pub fn to_string<T: Serialize>(value: &T) -> Result<String> {
     serde_yaml_ng::to_string(value).map_err(|e| Error::Usage(format!("YAML serialization: {e}")))
 }
 
+/// `text` as one YAML scalar, quoted where YAML would read it otherwise (`*x`, `null`,
+/// `~`, `- a`, `#`...): for names written into YAML text laid out by hand (flow-style
+/// rows), so that every name goes through the one serializer.
+pub fn scalar(text: &str) -> String {
+    let out = serde_yaml_ng::to_string(text).expect("a string always serializes");
+    out.trim_end_matches('\n').to_string()
+}
+
 /// The longest text quoted from an input in a message, characters.
 const MAX_QUOTED_CHARS: usize = 240;
 
@@ -100,6 +108,43 @@ pub fn shorten(text: &str) -> String {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod scalar_tests {
+    #[test]
+    fn every_name_reads_back_as_itself() {
+        for name in [
+            "cam00",
+            "*x",
+            "&a",
+            "!t",
+            "#c",
+            "[x",
+            "- x",
+            "|",
+            "%d",
+            "@x",
+            ">f",
+            "{x",
+            "null",
+            "~",
+            "true",
+            "1.5",
+            "c<!--#1?x",
+            "a: b",
+            "'q'",
+            "\"d\"",
+            "café",
+            "0x1F",
+            "1e3",
+        ] {
+            let text = format!("name: {}\n", super::scalar(name));
+            let back: std::collections::BTreeMap<String, String> =
+                serde_yaml_ng::from_str(&text).unwrap_or_else(|e| panic!("{name:?}: {e}"));
+            assert_eq!(back["name"], name, "{text}");
+        }
+    }
 }
 
 #[cfg(test)]

@@ -134,6 +134,14 @@ pub fn search(
 
 /// `pipeline pose-search`: the search on `frame` of `job`, as a table.
 pub fn report(job: &Job, frame: u32, tries: usize) -> Result<String> {
+    // What it reads must be what `run` would reuse: a stale, damaged or hand-edited
+    // artifact is refused by name, never searched from.
+    job.require_cached(&[
+        crate::artifacts::fitted::STAGE,
+        crate::artifacts::body_model::STAGE,
+        crate::artifacts::observation::STAGE,
+        crate::artifacts::silhouettes::STAGE,
+    ])?;
     let ctx = job.context();
     let judge = FrameSilhouettes::load(&ctx, frame)?;
     let started = std::time::Instant::now();

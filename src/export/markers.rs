@@ -21,7 +21,8 @@ enum Joint {
 }
 
 /// The markers of `skeleton`, named, in bone order (each head, then its bone's tail when no
-/// child starts there).
+/// child starts there). Names are unique: a name already taken (a bone `arm_tail` beside a
+/// leaf `arm`, or `a b` beside `a_b`) gets the first free suffix `_2`, `_3`...
 fn markers(skeleton: &Skeleton) -> Vec<(String, Joint)> {
     let children = skeleton.children();
     let mut out = Vec::new();
@@ -32,7 +33,57 @@ fn markers(skeleton: &Skeleton) -> Vec<(String, Joint)> {
             out.push((format!("{name}_tail"), Joint::Tail(b)));
         }
     }
+    // Heads first claim their own names, so a bone keeps its name whatever the order.
+    let mut taken: std::collections::HashSet<String> = out
+        .iter()
+        .filter(|(_, j)| matches!(j, Joint::Head(_)))
+        .map(|(n, _)| n.clone())
+        .collect();
+    let mut heads_seen: std::collections::HashSet<String> = std::collections::HashSet::new();
+    for (name, joint) in out.iter_mut() {
+        let first_head = matches!(joint, Joint::Head(_)) && heads_seen.insert(name.clone());
+        if first_head {
+            continue;
+        }
+        if taken.contains(name.as_str()) {
+            let base = name.clone();
+            *name = (2..)
+                .map(|k| format!("{base}_{k}"))
+                .find(|n| !taken.contains(n))
+                .expect("a free suffix");
+        }
+        taken.insert(name.clone());
+    }
     out
+}
+
+/// Whether a C3D of `skeleton`'s markers over capture frames `first..=last` can be
+/// written: at most 255 markers and 255 bytes a label, frames numbered up to 65,535.
+/// Checked before any stage runs, so a run never fails after the other exports.
+pub fn check_c3d(skeleton: &Skeleton, first: u32, last: u32) -> Result<(), String> {
+    let markers = markers(skeleton);
+    if markers.len() > u8::MAX as usize {
+        return Err(format!(
+            "export.formats holds c3d, but the skeleton makes {} markers and a C3D file holds \
+             at most 255; drop c3d (trc holds any number) or use fewer bones",
+            markers.len()
+        ));
+    }
+    if let Some((name, _)) = markers.iter().find(|(n, _)| n.len() > u8::MAX as usize) {
+        return Err(format!(
+            "export.formats holds c3d, but the marker name '{}...' is {} bytes long, over the \
+             255 a C3D label holds",
+            crate::text::escape_controls(&name.chars().take(20).collect::<String>()),
+            name.len()
+        ));
+    }
+    if last as u64 + 1 > u16::MAX as u64 || first > last {
+        return Err(format!(
+            "export.formats holds c3d, which numbers frames up to {}; frame {last} is past that",
+            u16::MAX - 1
+        ));
+    }
+    Ok(())
 }
 
 /// Each frame's marker positions in the export axes, millimetres.
@@ -308,6 +359,39 @@ fn parameter(s: &mut Vec<u8>, name: &str, id: i8, value: &Value) -> Result<usize
     s.extend_from_slice(&((body.len() + 2) as i16).to_le_bytes());
     s.extend_from_slice(&body);
     Ok(at)
+}
+
+#[cfg(test)]
+mod unique_tests {
+    use super::*;
+
+    #[test]
+    fn marker_names_are_unique() {
+        let bone = |name: &str, parent: Option<usize>, z: f64| crate::skeleton::Bone {
+            name: name.into(),
+            parent,
+            head: Vector3::new(0.0, 0.0, z),
+            tail: Vector3::new(0.0, 0.1, z),
+        };
+        let skeleton = Skeleton {
+            reference_frame: 0,
+            bones: vec![
+                bone("root", None, 0.0),
+                bone("arm0_lower", Some(0), 1.0),
+                bone("arm0_lower_tail", Some(0), 2.0),
+                bone("a b", Some(0), 3.0),
+                bone("a_b", Some(0), 4.0),
+            ],
+        };
+        let names: Vec<String> = markers(&skeleton).into_iter().map(|(n, _)| n).collect();
+        let set: std::collections::HashSet<&String> = names.iter().collect();
+        assert_eq!(set.len(), names.len(), "{names:?}");
+        assert!(names.contains(&"arm0_lower_tail".to_string()));
+        assert!(
+            names.contains(&"arm0_lower_tail_2".to_string()),
+            "{names:?}"
+        );
+    }
 }
 
 #[cfg(test)]

@@ -120,10 +120,19 @@ impl Skeleton {
             )));
         }
         let mut index: HashMap<&str, usize> = HashMap::new();
+        let mut comparable: HashMap<String, usize> = HashMap::new();
         for (i, e) in file.bones.iter().enumerate() {
             check_bone_name(&e.name).map_err(|m| bad(format!("bone {i}: {m}")))?;
-            if index.insert(&e.name, i).is_some() {
-                return Err(bad(format!("bone '{}' is declared twice", e.name)));
+            index.insert(&e.name, i);
+            if comparable
+                .insert(crate::camera::comparable_name(&e.name), i)
+                .is_some()
+            {
+                return Err(bad(format!(
+                    "bone '{}' is declared twice (names that differ only by case or by Unicode \
+                     composition are one name)",
+                    e.name
+                )));
             }
             let head = Vector3::from(e.head);
             let tail = Vector3::from(e.tail);
@@ -210,11 +219,12 @@ impl Skeleton {
         let v = |p: &Vector3<f64>| format!("[{:?}, {:?}, {:?}]", p.x, p.y, p.z);
         let mut s = format!("reference_frame: {}\nbones:\n", self.reference_frame);
         for b in &self.bones {
+            // Names through the YAML serializer: `*x`, `null` or `~` must stay names.
             let parent = b
                 .parent
-                .map(|p| self.bones[p].name.clone())
+                .map(|p| crate::yaml::scalar(&self.bones[p].name))
                 .unwrap_or_else(|| "null".into());
-            let _ = writeln!(s, "  - name: {}", b.name);
+            let _ = writeln!(s, "  - name: {}", crate::yaml::scalar(&b.name));
             let _ = writeln!(s, "    parent: {parent}");
             let _ = writeln!(s, "    head: {}", v(&b.head));
             let _ = writeln!(s, "    tail: {}", v(&b.tail));

@@ -83,7 +83,46 @@ pub(super) fn sources(ctx: &super::Context, frame: u32, key: &mut KeyBuilder) ->
 }
 
 fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
-    let seq = inputs.sequence;
+    let masks = masks(
+        s,
+        inputs.sequence,
+        |key, c| inputs.learned_plate(key, c),
+        frame,
+    )?;
+    let cameras = inputs
+        .sequence
+        .cameras
+        .iter()
+        .map(|c| c.name.clone())
+        .collect();
+    Ok(Produced::new(Silhouettes { cameras, masks }, Vec::new()))
+}
+
+/// Frame `frame`'s silhouettes as the stage computes them, written nowhere (for `pipeline
+/// check`, which inspects the first selected frame before any stage runs).
+pub fn frame_masks(
+    config: &Config,
+    seq: &Sequence,
+    cache: &crate::cache::Cache,
+    frame: u32,
+) -> Result<Vec<image::GrayImage>> {
+    let s = resolve(config, seq)?;
+    masks(
+        &s,
+        seq,
+        |key, c| learned_background::read(cache, key, &seq.cameras[c]),
+        frame,
+    )
+}
+
+/// Every camera's silhouette of `frame` under the settings `s`; `plate(key, c)` reads
+/// camera c's learned plate.
+fn masks(
+    s: &Settings,
+    seq: &Sequence,
+    plate: impl Fn(&str, usize) -> Result<crate::recon::learned_background::Learned>,
+    frame: u32,
+) -> Result<Vec<image::GrayImage>> {
     let p = &s.params;
     let mut masks = Vec::with_capacity(seq.cameras.len());
     for c in 0..seq.cameras.len() {
@@ -109,7 +148,7 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
                             .into(),
                     )
                 })?;
-                let learned = inputs.learned_plate(key, c)?;
+                let learned = plate(key, c)?;
                 silhouette::subtract_learned(&seq.load_frame(c, frame)?, &learned, p)
             }
             _ => {
@@ -122,8 +161,7 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
         };
         masks.push(mask);
     }
-    let cameras = seq.cameras.iter().map(|c| c.name.clone()).collect();
-    Ok(Produced::new(Silhouettes { cameras, masks }, Vec::new()))
+    Ok(masks)
 }
 
 /// The most frames a plate is learned from (evenly spread over the selected range): enough

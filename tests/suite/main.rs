@@ -23,6 +23,7 @@ mod graphcut;
 mod graphcut_degenerate;
 mod hostile_input;
 mod hostile_round3;
+mod hostile_round4;
 mod humanoid_fit;
 mod kill_resume;
 mod layers;

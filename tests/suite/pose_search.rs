@@ -99,5 +99,19 @@ fn pose_search_finds_a_knocked_bone_and_leaves_a_good_fit() {
     // A frame without a fit is refused by name.
     let (ok, _, err) = run_cli(&["pose-search", "pipeline.yaml", "--frame", "5"], d);
     assert!(!ok);
-    assert!(err.contains("frame 5 has no cached fit"), "{err}");
+    assert!(
+        err.contains("the cached fit result of frame 5 is missing"),
+        "{err}"
+    );
+
+    // A hand-edited state (which `run` would recompute) is refused, never searched from.
+    let state = d.join("cache/fit/000002.state.json");
+    let text = std::fs::read_to_string(&state).unwrap();
+    let digit = text.find(|c: char| c.is_ascii_digit() && c != '0').unwrap();
+    let mut edited = text.clone();
+    edited.replace_range(digit..digit + 1, "0");
+    std::fs::write(&state, edited).unwrap();
+    let (ok, out, err) = run_cli(&["pose-search", "pipeline.yaml", "--frame", "2"], d);
+    assert!(!ok, "{out}");
+    assert!(err.contains("fit result of frame 2 is damaged"), "{err}");
 }

@@ -13,20 +13,6 @@ use common::*;
 use std::path::Path;
 use std::process::Command;
 
-fn have_ffmpeg() -> bool {
-    let found = Command::new("ffmpeg")
-        .arg("-version")
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !found && std::env::var("HULLPOSE_EXTERNAL_CHECKS").is_ok_and(|v| v == "1") {
-        panic!("ffmpeg is required (HULLPOSE_EXTERNAL_CHECKS=1): apt install ffmpeg");
-    }
-    if !found {
-        eprintln!("ffmpeg not installed: video tests skipped");
-    }
-    found
-}
-
 /// A copy of the bundled sample (7 frames, 15 cameras at 256x192) in a fresh folder.
 fn sample() -> tempfile::TempDir {
     let dir = process_tempdir();

@@ -614,3 +614,19 @@ pub fn count_files_ending(dir: &Path, suffix: &str) -> usize {
             .count()
     })
 }
+
+/// Whether the system's ffmpeg runs; without it the video tests say so and pass, unless
+/// `HULLPOSE_EXTERNAL_CHECKS=1` (as CI sets it), which makes its absence a failure.
+pub fn have_ffmpeg() -> bool {
+    let found = std::process::Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found && std::env::var("HULLPOSE_EXTERNAL_CHECKS").is_ok_and(|v| v == "1") {
+        panic!("ffmpeg is required (HULLPOSE_EXTERNAL_CHECKS=1): apt install ffmpeg");
+    }
+    if !found {
+        eprintln!("ffmpeg not installed: video tests skipped");
+    }
+    found
+}
