@@ -518,6 +518,38 @@ impl Sequence {
     /// Checks every frame's, mask's and plate's header against the calibration.
     fn check_image_sizes(&self) -> Result<()> {
         use rayon::prelude::*;
+        // Every camera whose first frame's size is not its calibration's, named at once
+        // (a calibration made at another resolution usually differs for all of them).
+        if let (true, Some(&first)) = (self.has_frames, self.frames.first()) {
+            let mut wrong = Vec::new();
+            for (c, cam) in self.cameras.iter().enumerate() {
+                if self.undecoded.contains(&cam.name) {
+                    continue;
+                }
+                let path = self.frame_path(c, first);
+                if let Ok((w, h)) = image_dimensions(&path) {
+                    if (w, h) != (cam.width, cam.height) {
+                        wrong.push(format!(
+                            "{} ({w}x{h}, calibrated {}x{})",
+                            crate::text::quoted(&cam.name),
+                            cam.width,
+                            cam.height
+                        ));
+                    }
+                }
+            }
+            if wrong.len() > 1 {
+                return Err(Error::invalid(
+                    self.dir.join("frames"),
+                    format!(
+                        "{} cameras' images are not the size their calibration states: {}; \
+                         resize the images, or fix width/height (and K) in the calibration",
+                        wrong.len(),
+                        wrong.join(", ")
+                    ),
+                ));
+            }
+        }
         let mut jobs: Vec<(usize, PathBuf)> = Vec::new();
         for (c, cam) in self.cameras.iter().enumerate() {
             let undecoded = self.undecoded.contains(&cam.name);

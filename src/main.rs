@@ -208,9 +208,13 @@ enum Command {
         /// The source format.
         #[arg(long, value_enum)]
         from: CalibSource,
-        /// opencv: INTRI EXTRI; colmap: DIR.
+        /// opencv: INTRI EXTRI; colmap: DIR; pose2sim: Calib.toml; qualisys: FILE.qca.txt.
         #[arg(required = true, num_args = 1..=2)]
         paths: Vec<PathBuf>,
+        /// pose2sim: the unit of the file's translations (Pose2Sim writes metres; anipose
+        /// its calibration board's unit).
+        #[arg(long, value_enum, default_value = "m")]
+        units: LengthUnit,
         /// Where to write cameras.yaml.
         #[arg(long, default_value = "calib/cameras.yaml")]
         out: PathBuf,
@@ -254,6 +258,32 @@ enum CalibSource {
     Opencv,
     /// COLMAP text model: a folder with cameras.txt and images.txt.
     Colmap,
+    /// Pose2Sim or anipose calibration TOML (Calib.toml); see --units.
+    #[value(alias = "anipose", alias = "toml")]
+    Pose2sim,
+    /// Qualisys Track Manager calibration (.qca.txt), its video cameras.
+    #[value(alias = "qca")]
+    Qualisys,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum LengthUnit {
+    /// Metres (Pose2Sim).
+    M,
+    /// Centimetres.
+    Cm,
+    /// Millimetres (anipose with a board measured in mm).
+    Mm,
+}
+
+impl LengthUnit {
+    fn metres(self) -> f64 {
+        match self {
+            LengthUnit::M => 1.0,
+            LengthUnit::Cm => 0.01,
+            LengthUnit::Mm => 0.001,
+        }
+    }
 }
 
 #[derive(Subcommand)]
@@ -652,6 +682,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
         Command::ImportCalib {
             from,
             paths,
+            units,
             out,
             size,
             force,
@@ -665,6 +696,17 @@ fn run(cli: Cli) -> hullpose::Result<()> {
                     hullpose::calib_import::from_opencv(intri, extri, size)?
                 }
                 (CalibSource::Colmap, [dir]) => hullpose::calib_import::from_colmap(dir)?,
+                (CalibSource::Pose2sim, [file]) => {
+                    hullpose::calib_import::pose2sim::from_toml(file, units.metres())?
+                }
+                (CalibSource::Qualisys, [file]) => {
+                    hullpose::calib_import::qualisys::from_qca(file)?
+                }
+                (CalibSource::Pose2sim | CalibSource::Qualisys, _) => {
+                    return Err(hullpose::Error::Usage(
+                        "--from pose2sim and --from qualisys take one file".into(),
+                    ))
+                }
                 (CalibSource::Opencv, _) => {
                     return Err(hullpose::Error::Usage(
                         "--from opencv takes two files: INTRI EXTRI (intri.yml extri.yml)".into(),
@@ -758,6 +800,7 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             // The same checks as `run` before its first stage.
             let job = Job::load(Config::load(&file)?, None)?;
             job.validate()?;
+            hullpose::export::check_formats(&job)?;
             let seq = &job.sequence;
             for w in seq.warnings.iter().chain(&job.inspect_first_frame()?) {
                 eprintln!("warning: {}", hullpose::text::escape_controls(w));

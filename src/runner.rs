@@ -48,6 +48,38 @@ pub struct StageStatus {
     pub missing: usize,
 }
 
+/// A camera sees a surface point for the two-view stages when its direction lies within
+/// this angle of the point's normal, degrees.
+const SEEING_ANGLE_DEG: f64 = 60.0;
+
+/// Below this share of the hull's surface seen by two cameras, `check` warns.
+const MIN_SEEN_TWICE: f64 = 0.5;
+
+/// The share of `mesh`'s surface (its vertices, which marching cubes spreads evenly) that two of
+/// `cams` see: in front, inside the image, within [`SEEING_ANGLE_DEG`] of the normal.
+/// Occlusion is not tested, so the share is an upper bound.
+fn seen_twice_share(cams: &[crate::camera::Camera], mesh: &crate::geometry::TriMesh) -> f64 {
+    let normals = mesh.vertex_normals();
+    let cos = SEEING_ANGLE_DEG.to_radians().cos();
+    let centres: Vec<_> = cams.iter().map(|c| c.centre()).collect();
+    let seen = mesh
+        .vertices
+        .iter()
+        .zip(&normals)
+        .filter(|(v, n)| {
+            cams.iter()
+                .zip(&centres)
+                .filter(|(cam, c)| {
+                    let to_cam = (*c - *v).normalize();
+                    n.dot(&to_cam) >= cos && cam.project(v).is_some_and(|px| cam.in_image(&px))
+                })
+                .count()
+                >= 2
+        })
+        .count();
+    seen as f64 / mesh.vertices.len().max(1) as f64
+}
+
 /// A carving box wider than this on some axis, metres, is more than one person.
 const PERSON_BOX_M: f64 = 3.0;
 
@@ -220,21 +252,6 @@ impl Job {
         crate::recon::visual_hull::validate_for_cameras(&self.config.visual_hull, cameras.len())
             .map_err(|m| Error::invalid(&self.config.path, m))?;
         self.reference_frame()?;
-        if self
-            .config
-            .export
-            .formats
-            .contains(&crate::config::Format::C3d)
-        {
-            if let (Some(skeleton), Some(&first), Some(&last)) = (
-                self.sequence.skeleton()?,
-                self.frames.first(),
-                self.frames.last(),
-            ) {
-                crate::export::markers::check_c3d(&skeleton, first, last)
-                    .map_err(|m| Error::invalid(&self.config.path, m))?;
-            }
-        }
         for name in &self.config.export.overlay_cameras {
             self.sequence.camera_index(calibration, name).map_err(|e| {
                 Error::invalid(&self.config.path, format!("export.overlay_cameras: {e}"))
@@ -286,6 +303,9 @@ impl Job {
                 )
             })?;
             let extent = (hi - lo).max();
+            if let Some(line) = self.surface_coverage(frame, &masks)? {
+                out.push(line);
+            }
             if p.bbox.is_none() && extent > PERSON_BOX_M {
                 out.push(format!(
                     "frame {frame}: the box the silhouettes leave to carve is {:.1} x {:.1} x \
@@ -299,6 +319,38 @@ impl Job {
             }
         }
         Ok(out)
+    }
+
+    /// How much of frame `frame`'s hull surface (carved from `masks` at 2 cm or the
+    /// configured voxel, whichever is coarser) at least two cameras see within
+    /// [`SEEING_ANGLE_DEG`] of its normal: a warning, with what it means for the stages,
+    /// when that is below [`MIN_SEEN_TWICE`]; always one line on stdout.
+    fn surface_coverage(&self, frame: u32, masks: &[image::GrayImage]) -> Result<Option<String>> {
+        let cams = &self.sequence.cameras;
+        let mut p = self.config.visual_hull.clone();
+        p.voxel_size = p.voxel_size.max(0.02);
+        let hull = crate::recon::visual_hull::reconstruct(cams, masks, &p)
+            .map_err(|m| Error::invalid(&self.config.path, format!("frame {frame}: {m}")))?;
+        let Some(hull) = hull else {
+            return Ok(None);
+        };
+        let share = seen_twice_share(cams, &hull.mesh);
+        println!(
+            "coverage: {:.0}% of frame {frame}'s hull surface is seen by two or more of the {} \
+             cameras (within {SEEING_ANGLE_DEG:.0} degrees of its normal)",
+            100.0 * share,
+            cams.len()
+        );
+        Ok((share < MIN_SEEN_TWICE).then(|| {
+            format!(
+                "only {:.0}% of frame {frame}'s hull surface is seen by two or more cameras \
+                 (within {SEEING_ANGLE_DEG:.0} degrees of its normal): elsewhere the graph cut \
+                 and the reliability have one view or none, so the surface there is the hull's \
+                 (phantom volumes stay) and the fit leans on the silhouettes; the method wants \
+                 8 or more cameras around the subject (README, \"How many cameras\")",
+                100.0 * share
+            )
+        }))
     }
 
     pub fn reference_frame(&self) -> Result<Option<u32>> {

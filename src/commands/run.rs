@@ -21,6 +21,9 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
         Some(until) => until == EXPORT,
         None => true,
     };
+    if exports {
+        crate::export::check_formats(job)?;
+    }
     // `--only export` and `--from export` force nothing upstream: the stages the exports
     // read are computed when missing or stale, as for any stage's inputs.
     let stage_opts = RunOptions {

@@ -174,3 +174,20 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
     written.outputs.dedup();
     Ok(written)
 }
+
+/// Refuses, before any stage runs, an export `export.formats` asks for that could not be
+/// written for `job` (a C3D past its marker or frame limits), so that a run never fails
+/// after the other exports are written.
+pub fn check_formats(job: &crate::runner::Job) -> Result<()> {
+    if job.config.export.formats.contains(&Format::C3d) {
+        if let (Some(skeleton), Some(&first), Some(&last)) = (
+            job.sequence.skeleton()?,
+            job.frames.first(),
+            job.frames.last(),
+        ) {
+            markers::check_c3d(&skeleton, first, last)
+                .map_err(|m| Error::invalid(&job.config.path, m))?;
+        }
+    }
+    Ok(())
+}

@@ -264,8 +264,22 @@ pub fn learn_plates(
     }))
 }
 
+/// Above this share of its pixels marked as where the subject stays, a camera's learning
+/// has taken the room for the subject: one person fills far less of a view.
+const MAX_SUBJECT_SHARE: f64 = 0.6;
+
 /// Below this share of its pixels changing over the frames, a camera saw nothing move.
 const MIN_CHANGED: f64 = 1e-4;
+
+/// The cameras (with their share) whose learning marks more than [`MAX_SUBJECT_SHARE`] of
+/// the image as where the subject stays.
+fn room_taken_for_subject(info: &LearnedInfo) -> Vec<String> {
+    info.cameras
+        .iter()
+        .filter(|c| c.never_background > MAX_SUBJECT_SHARE)
+        .map(|c| format!("{} ({:.0}%)", c.camera, 100.0 * c.never_background))
+        .collect()
+}
 
 fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
     let p = &config.silhouette;
@@ -284,6 +298,23 @@ fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
                  frames where the subject moves. Select more frames (`frames`), or give \
                  background plates (background/<camera>.png) or masks (masks/<camera>/)",
                 still.join(", "),
+                info.frames.len()
+            ),
+        ));
+    }
+    let room = room_taken_for_subject(info);
+    if !room.is_empty() {
+        return Err(Error::invalid(
+            &config.path,
+            format!(
+                "silhouette.method 'learned': in camera(s) {} the learning marks over {:.0}% of \
+                 the image as where the subject stays, which is not one person: the subject \
+                 (or the whole scene) hardly moves over the {} frames learned from, so the room \
+                 cannot be told from the subject. Give background plates \
+                 (background/<camera>.png) or masks (masks/<camera>/), or select frames where \
+                 the subject moves through the view",
+                room.join(", "),
+                100.0 * MAX_SUBJECT_SHARE,
                 info.frames.len()
             ),
         ));
@@ -339,4 +370,25 @@ pub fn learning_report(learning: &Learning) -> String {
         learning.info.frames.len(),
         cameras.join(", ")
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_camera_whose_subject_fills_most_of_the_image_is_named() {
+        let camera = |name: &str, never_background: f64| CameraShares {
+            camera: name.into(),
+            undecided: 0.0,
+            never_background,
+            changed: 0.1,
+        };
+        let info = LearnedInfo {
+            frames: vec![0, 1],
+            cameras: vec![camera("a", 0.05), camera("b", 0.85), camera("c", 0.61)],
+            files: Vec::new(),
+        };
+        assert_eq!(room_taken_for_subject(&info), ["b (85%)", "c (61%)"]);
+    }
 }

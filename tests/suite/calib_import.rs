@@ -289,3 +289,203 @@ fn colmap_errors_name_the_line() {
     let missing = from_colmap(Path::new("/nonexistent/colmap")).unwrap_err();
     assert!(missing.to_string().contains("cameras.txt"));
 }
+
+/// A Pose2Sim Calib.toml as Pose2Sim's `toml_write` lays it out: two cameras, Rodrigues
+/// rotations, translations in metres, four distortion terms, a metadata table.
+const POSE2SIM_TOML: &str = r#"[cam_01]
+name = "cam_01"
+size = [ 1088.0, 1920.0]
+matrix = [ [ 1677.3, 0.0, 543.8], [ 0.0, 1679.9, 962.1], [ 0.0, 0.0, 1.0]]
+distortions = [ -0.0431, 0.0712, 0.0011, -0.0006]
+rotation = [ 1.2214, -1.1834, 1.1721]
+translation = [ 0.2013, 0.4821, 3.8514]
+fisheye = false
+
+[cam_02]
+name = "cam_02"
+size = [ 1088.0, 1920.0]
+matrix = [ [ 1690.0, 0.0, 540.0], [ 0.0, 1690.0, 960.0], [ 0.0, 0.0, 1.0]]
+distortions = [ 0.012, -0.03, 0.0, 0.0]
+rotation = [ 1.9, 0.4, -0.35]
+translation = [ -0.31, 0.52, 4.2]
+fisheye = false
+
+[metadata]
+adjusted = false
+error = 0.0
+"#;
+
+#[test]
+fn pose2sim_toml_projects_like_opencv() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("Calib.toml");
+    std::fs::write(&path, POSE2SIM_TOML).unwrap();
+    let imported = hullpose::calib_import::pose2sim::from_toml(&path, 1.0).unwrap();
+    assert_eq!(imported.cameras.len(), 2);
+    assert!(imported.warnings.is_empty(), "{:?}", imported.warnings);
+    let truth = [
+        (
+            [1.2214, -1.1834, 1.1721],
+            [0.2013, 0.4821, 3.8514],
+            [1677.3, 1679.9, 543.8, 962.1],
+            [-0.0431, 0.0712, 0.0011, -0.0006, 0.0],
+        ),
+        (
+            [1.9, 0.4, -0.35],
+            [-0.31, 0.52, 4.2],
+            [1690.0, 1690.0, 540.0, 960.0],
+            [0.012, -0.03, 0.0, 0.0, 0.0],
+        ),
+    ];
+    for (cam, (r, t, k, d)) in imported.cameras.iter().zip(truth) {
+        assert_eq!((cam.width, cam.height), (1088, 1920));
+        check_close(cam, |x| {
+            opencv_project(x, &rodrigues(r), &Vector3::from(t), k, d)
+        });
+    }
+    // The same file in millimetres (anipose with a board in mm): --units mm.
+    let mm = POSE2SIM_TOML
+        .replace("[ 0.2013, 0.4821, 3.8514]", "[ 201.3, 482.1, 3851.4]")
+        .replace("[ -0.31, 0.52, 4.2]", "[ -310.0, 520.0, 4200.0]");
+    std::fs::write(&path, &mm).unwrap();
+    let wrong = hullpose::calib_import::pose2sim::from_toml(&path, 1.0).unwrap();
+    assert!(
+        wrong.warnings.iter().any(|w| w.contains("--units mm")),
+        "{:?}",
+        wrong.warnings
+    );
+    let scaled = hullpose::calib_import::pose2sim::from_toml(&path, 0.001).unwrap();
+    for (a, b) in scaled.cameras.iter().zip(&imported.cameras) {
+        assert!((a.t - b.t).norm() < 1e-9);
+    }
+    // Through the command line, and refusals that name the table and key.
+    let out = dir.path().join("cameras.yaml");
+    std::fs::write(&path, POSE2SIM_TOML).unwrap();
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_pipeline"))
+        .args(["import-calib", "--from", "pose2sim"])
+        .arg(&path)
+        .arg("--out")
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert_eq!(read_cameras(&out).unwrap().cameras, imported.cameras);
+    for (from, to, what) in [
+        (
+            "fisheye = false\n\n[cam_02]",
+            "fisheye = true\n\n[cam_02]",
+            "fisheye",
+        ),
+        (
+            "rotation = [ 1.9, 0.4, -0.35]",
+            "rotation = [ 1.9, 0.4]",
+            "'rotation'",
+        ),
+        (
+            "size = [ 1088.0, 1920.0]\nmatrix = [ [ 1690.0",
+            "size = [ 10.5, 1920.0]\nmatrix = [ [ 1690.0",
+            "'size'",
+        ),
+    ] {
+        std::fs::write(&path, POSE2SIM_TOML.replacen(from, to, 1)).unwrap();
+        let err = hullpose::calib_import::pose2sim::from_toml(&path, 1.0)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(what) && err.contains("cam_0"), "{err}");
+    }
+}
+
+/// One video camera of a Qualisys .qca.txt, from the world-to-camera pose in OpenCV's
+/// terms that it must import as: the camera's pose in the world (camera to world, Qualisys's
+/// camera axes: -z forward, y up) in mm, the matrix written by column, intrinsics in 1/64
+/// pixel on the sensor, the image a crop at (`left`, `top`).
+fn qca_camera(serial: &str, model: &str, cam: &Camera, left: f64, top: f64) -> String {
+    let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
+    let camera_to_world = cam.r.transpose() * flip;
+    let c = -cam.r.transpose() * cam.t * 1000.0;
+    let m = |i: usize, j: usize| camera_to_world[(i, j)];
+    format!(
+        r#"    <camera active="1" avg-residual="0.31" serial="{serial}" model="{model}" viewrotation="0">
+      <fov_marker left="0" top="0" right="1919" bottom="1087"/>
+      <fov_video left="{left}" top="{top}" right="{}" bottom="{}"/>
+      <transform x="{}" y="{}" z="{}" r11="{}" r12="{}" r13="{}" r21="{}" r22="{}" r23="{}" r31="{}" r32="{}" r33="{}"/>
+      <intrinsic focallength="4.5" sensorMinU="0" sensorMaxU="1919" sensorMinV="0" sensorMaxV="1087" focalLengthU="{}" focalLengthV="{}" centerPointU="{}" centerPointV="{}" skew="0" radialDistortion1="{}" radialDistortion2="{}" radialDistortion3="0" tangentalDistortion1="{}" tangentalDistortion2="{}"/>
+    </camera>
+"#,
+        left + cam.width as f64 - 1.0,
+        top + cam.height as f64 - 1.0,
+        c.x,
+        c.y,
+        c.z,
+        m(0, 0),
+        m(1, 0),
+        m(2, 0),
+        m(0, 1),
+        m(1, 1),
+        m(2, 1),
+        m(0, 2),
+        m(1, 2),
+        m(2, 2),
+        cam.fx * 64.0,
+        cam.fy * 64.0,
+        (cam.cx + left) * 64.0,
+        (cam.cy + top) * 64.0,
+        cam.dist[0] * 64.0,
+        cam.dist[1] * 64.0,
+        cam.dist[2] * 64.0,
+        cam.dist[3] * 64.0,
+    )
+}
+
+#[test]
+fn qualisys_qca_imports_the_video_cameras_as_pose2sim_reads_them() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let sample = read_cameras(&repo.join("calib/cameras.yaml"))
+        .unwrap()
+        .cameras;
+    let mut cams: Vec<Camera> = sample[..3].to_vec();
+    for c in &mut cams {
+        c.dist[4] = 0.0;
+    }
+    // Serials 10, 9, 100: natural order puts 9 first; a marker camera is left out.
+    let serials = ["10", "9", "100"];
+    let mut xml = String::from(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<calibration source=\"test\">\n  <cameras>\n",
+    );
+    for (k, (cam, serial)) in cams.iter().zip(serials).enumerate() {
+        xml += &qca_camera(serial, "Miqus Video", cam, 8.0 * k as f64, 4.0 * k as f64);
+    }
+    xml += &qca_camera("555", "Miqus M3", &cams[0], 0.0, 0.0);
+    xml += "  </cameras>\n</calibration>\n";
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("calib.qca.txt");
+    std::fs::write(&path, &xml).unwrap();
+    let imported = hullpose::calib_import::qualisys::from_qca(&path).unwrap();
+    let names: Vec<&str> = imported.cameras.iter().map(|c| c.name.as_str()).collect();
+    assert_eq!(names, ["9", "10", "100"]);
+    assert!(
+        imported.warnings.iter().any(|w| w.contains("555")),
+        "{:?}",
+        imported.warnings
+    );
+    for (cam, serial) in cams.iter().zip(serials) {
+        let got = imported.cameras.iter().find(|c| c.name == serial).unwrap();
+        assert_eq!((got.width, got.height), (cam.width, cam.height));
+        // The sample's points lie around the world origin, in front of every camera.
+        for p in points() {
+            let want = cam.project(&p).expect("in front");
+            let have = got.project(&p).expect("in front after the import");
+            assert!(
+                (want - have).norm() < 0.01,
+                "{serial}: {want:?} vs {have:?}"
+            );
+        }
+    }
+    let err = {
+        std::fs::write(&path, xml.replace("Miqus Video", "Oqus 7+")).unwrap();
+        hullpose::calib_import::qualisys::from_qca(&path)
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(err.contains("no video camera"), "{err}");
+}

@@ -14,6 +14,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("yaml", 0),
     ("shell", 0),
     ("rng", 0),
+    ("text", 0),
     ("camera", 0),
     ("imageio", 0),
     ("video", 0),

@@ -26,6 +26,7 @@ mod hostile_round3;
 mod hostile_round4;
 mod humanoid_fit;
 mod kill_resume;
+mod lab_footage;
 mod layers;
 mod learned_background;
 mod masks_only;

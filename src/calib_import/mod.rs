@@ -13,6 +13,10 @@
 //!   translation. COLMAP puts the top-left pixel's centre at (0.5, 0.5), we put it at (0, 0):
 //!   `cx_ours = cx_colmap - 0.5` (and the same for cy), so that every pixel coordinate is
 //!   COLMAP's minus 0.5.
+//! - **Pose2Sim / anipose TOML** ([`pose2sim`]) and **Qualisys `.qca.txt`** ([`qualisys`]).
+
+pub mod pose2sim;
+pub mod qualisys;
 
 use crate::camera::{check_name, Camera};
 use crate::error::Refusal;
@@ -273,19 +277,7 @@ pub fn from_opencv(intri: &Path, extri: &Path, size: Option<(u32, u32)>) -> Resu
             }
         };
         let t = cv_required(extri, &ex, &format!("T_{name}"), &[3])?;
-        let cam = Camera {
-            name: name.clone(),
-            width,
-            height,
-            fx: k[0],
-            fy: k[4],
-            cx: k[2],
-            cy: k[5],
-            skew: k[1],
-            dist: d,
-            r: rotation,
-            t: Vector3::new(t[0], t[1], t[2]),
-        };
+        let cam = camera_from_k(name.clone(), (width, height), k, d, rotation, t);
         if k[3] != 0.0 || k[6] != 0.0 || k[7] != 0.0 || k[8] != 1.0 {
             return Err(Error::invalid(
                 intri,
@@ -297,6 +289,47 @@ pub fn from_opencv(intri: &Path, extri: &Path, size: Option<(u32, u32)>) -> Resu
         cameras.push(cam);
     }
     revalidate(intri, cameras, warnings)
+}
+
+/// A camera from a row-major 3x3 `k` ([fx, s, cx; 0, fy, cy; 0, 0, 1], checked by the
+/// caller), its image size, distortion and world-to-camera `r`, `t`.
+fn camera_from_k(
+    name: String,
+    (width, height): (u32, u32),
+    k: &[f64],
+    dist: [f64; 5],
+    r: Matrix3<f64>,
+    t: &[f64],
+) -> Camera {
+    Camera {
+        name,
+        width,
+        height,
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        skew: k[1],
+        dist,
+        r,
+        t: Vector3::new(t[0], t[1], t[2]),
+    }
+}
+
+/// A warning when the cameras stand farther apart than a capture room allows in metres
+/// (median distance from their centroid over 100 m): the file's lengths are in another unit.
+fn unit_warning(cameras: &[Camera]) -> Option<String> {
+    let centres: Vec<Vector3<f64>> = cameras.iter().map(Camera::centre).collect();
+    let mean = centres.iter().sum::<Vector3<f64>>() / centres.len() as f64;
+    let mut d: Vec<f64> = centres.iter().map(|c| (c - mean).norm()).collect();
+    d.sort_by(f64::total_cmp);
+    let median = d[d.len() / 2];
+    (median > 100.0).then(|| {
+        format!(
+            "the cameras stand a median {median:.0} m from their centre: the translations look \
+             like millimetres or centimetres; import again with --units mm (or cm)"
+        )
+    })
 }
 
 /// Checks imported cameras as cameras.yaml will be checked when read (unique names, also
