@@ -80,9 +80,6 @@ fn seen_twice_share(cams: &[crate::camera::Camera], mesh: &crate::geometry::TriM
     seen as f64 / mesh.vertices.len().max(1) as f64
 }
 
-/// A carving box wider than this on some axis, metres, is more than one person.
-const PERSON_BOX_M: f64 = 3.0;
-
 /// A loaded sequence with the frames selected for a run.
 pub struct Job {
     pub config: Config,
@@ -302,20 +299,12 @@ impl Job {
                     format!("frame {frame}'s box {:.2?} m: {m}", (hi - lo).as_slice()),
                 )
             })?;
-            let extent = (hi - lo).max();
             if let Some(line) = self.surface_coverage(frame, &masks)? {
                 out.push(line);
             }
-            if p.bbox.is_none() && extent > PERSON_BOX_M {
-                out.push(format!(
-                    "frame {frame}: the box the silhouettes leave to carve is {:.1} x {:.1} x \
-                     {:.1} m, far larger than a person (over {PERSON_BOX_M} m): the masks mark \
-                     much of the room as the subject; check the silhouettes \
-                     (`pipeline view`), or set visual_hull.bbox",
-                    hi.x - lo.x,
-                    hi.y - lo.y,
-                    hi.z - lo.z
-                ));
+            if p.bbox.is_none() {
+                let size = hi - lo;
+                out.extend(cov.box_problem(frame, [size.x, size.y, size.z]));
             }
         }
         Ok(out)

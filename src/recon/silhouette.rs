@@ -388,7 +388,16 @@ pub struct Coverage {
     pub empty: Vec<String>,
     /// Cameras whose silhouette covers at least [`FULL_SHARE`] of the image.
     pub full: Vec<String>,
+    /// Every camera's name and the share of its image its silhouette covers (0..1).
+    pub shares: Vec<(String, f64)>,
 }
+
+/// A box wider than this on some axis, metres, holds more than one person.
+pub const PERSON_BOX_M: f64 = 3.0;
+
+/// A silhouette covering more than this share of its image is more than one person at the
+/// distances a capture rig films from.
+const LARGE_SHARE: f64 = 0.4;
 
 /// The share of an image a silhouette covers from which it is taken as "everything" (a
 /// blank white or inverted mask): it carves nothing.
@@ -401,6 +410,7 @@ impl Coverage {
         for (cam, m) in cams.iter().zip(masks) {
             let on = m.as_raw().iter().filter(|&&v| v >= 128).count();
             let all = m.as_raw().len().max(1);
+            out.shares.push((cam.name.clone(), on as f64 / all as f64));
             if on == 0 {
                 out.empty.push(cam.name.clone());
             } else if on as f64 >= FULL_SHARE * all as f64 {
@@ -408,6 +418,41 @@ impl Coverage {
             }
         }
         out
+    }
+
+    /// The warning for frame `frame` whose carving box spans `size` (metres, per axis)
+    /// when it is wider than [`PERSON_BOX_M`]: the box, and the cameras whose silhouettes
+    /// cover most of their image (largest first), which cause it.
+    pub fn box_problem(&self, frame: u32, size: [f64; 3]) -> Option<String> {
+        if size.iter().all(|&s| s <= PERSON_BOX_M) {
+            return None;
+        }
+        let mut large: Vec<&(String, f64)> = self
+            .shares
+            .iter()
+            .filter(|(_, s)| *s > LARGE_SHARE)
+            .collect();
+        large.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let cameras = if large.is_empty() {
+            "no camera's silhouette covers much of its image: check the calibration, or set \
+             visual_hull.bbox"
+                .to_string()
+        } else {
+            format!(
+                "the silhouettes of camera(s) {} cover most of their image (the room marked as \
+                 the subject?): check them (`pipeline view`), or set visual_hull.bbox",
+                large
+                    .iter()
+                    .map(|(c, s)| format!("{} ({:.0}%)", crate::text::quoted(c), 100.0 * s))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        };
+        Some(format!(
+            "frame {frame}: the box the silhouettes leave to carve is {:.1} x {:.1} x {:.1} m, \
+             far larger than a person (over {PERSON_BOX_M} m): {cameras}",
+            size[0], size[1], size[2]
+        ))
     }
 
     /// The cameras whose silhouette of `frame` covers the whole image: `Ok(None)` when

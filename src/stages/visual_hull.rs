@@ -37,6 +37,10 @@ fn compute(p: &VisualHullParams, inputs: &Inputs, frame: u32) -> Result<Produced
             format!("visual_hull, frame {frame}: {m}"),
         )
     })?;
+    if let (Some(h), None) = (&hull, &p.bbox) {
+        let size = h.grid.dims.map(|d| d as f64 * h.grid.voxel);
+        warnings.extend(coverage.box_problem(frame, size));
+    }
     let artifact = match hull {
         Some(h) => Reconstruction {
             mesh: h.mesh,

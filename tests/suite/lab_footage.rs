@@ -67,3 +67,33 @@ fn every_camera_whose_images_differ_from_its_calibration_is_named() {
     );
     assert!(err.contains("256x192, calibrated 264x192"), "{err}");
 }
+
+#[test]
+fn masks_that_take_the_room_for_the_subject_are_named_by_camera() {
+    let dir = process_tempdir();
+    let d = dir.path();
+    copy_sample(d);
+    // Every camera's mask of frame 0 marks all but a thin border: the room as the subject.
+    let masks = d.join("data/tripod/masks");
+    for cam in std::fs::read_dir(&masks).unwrap() {
+        let path = cam.unwrap().path().join("000000.png");
+        let (w, h) = image::image_dimensions(&path).unwrap();
+        let border = 6;
+        let img = image::GrayImage::from_fn(w, h, |x, y| {
+            let inside = x >= border && y >= border && x + border < w && y + border < h;
+            image::Luma([if inside { 255 } else { 0 }])
+        });
+        img.save(&path).unwrap();
+    }
+    let yaml = d.join("pipeline.yaml");
+    let text = std::fs::read_to_string(&yaml).unwrap();
+    std::fs::write(&yaml, text.replace("frames: all", "frames: 0..0")).unwrap();
+    let (ok, _, err) = run_cli(&["check", "pipeline.yaml"], d);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("far larger than a person")
+            && err.contains("'cam00' (")
+            && err.contains("cover most of their image"),
+        "{err}"
+    );
+}
