@@ -28,6 +28,13 @@ const MESH: Cap = Cap {
     unit: 1 << 20,
     unit_name: "MB",
 };
+/// One video's decoded frames, bounded by their raw size before decoding: 32768 MB.
+const DECODED: Cap = Cap {
+    env: "HULLPOSE_MAX_DECODED_MB",
+    default: 32_768,
+    unit: 1 << 20,
+    unit_name: "MB",
+};
 /// Image size, checked from the header before decoding: 100 megapixels.
 const IMAGE: Cap = Cap {
     env: "HULLPOSE_MAX_IMAGE_MEGAPIXELS",
@@ -166,6 +173,15 @@ pub fn check_image(path: &Path, width: u32, height: u32) -> Result<()> {
     let pixels = width as u64 * height as u64;
     if pixels > IMAGE.limit()? {
         return Err(IMAGE.refuse(path, &format!("the image ({width}x{height})"), Some(pixels))?);
+    }
+    Ok(())
+}
+
+/// Checks the `bytes` a decoding of `path` may write (`what` says what is decoded)
+/// against the decoded-video cap.
+pub fn check_decoded(path: &Path, what: &str, bytes: u64) -> Result<()> {
+    if bytes > DECODED.limit()? {
+        return Err(DECODED.refuse(path, what, Some(bytes))?);
     }
     Ok(())
 }

@@ -478,44 +478,23 @@ fn frame_intact(path: &Path, record: &FrameRecord) -> bool {
     blake3::hash(&bytes).to_hex().as_str() == record.blake3
 }
 
-/// The cap on one decoding's disk space, MB (environment `HULLPOSE_MAX_DECODED_MB`).
-const DECODED_CAP_ENV: &str = "HULLPOSE_MAX_DECODED_MB";
-const DECODED_CAP_DEFAULT_MB: u64 = 32_768;
-
-/// Refuses a decoding of `count` frames that could take more than the cap, or more than
-/// the free space of the disk holding `root`. Its size is bounded by the uncompressed
-/// frames (PNG never grows them by more than a little).
+/// Refuses a decoding of `count` frames that could take more than the cap
+/// ([`crate::limits::check_decoded`]), or more than the free space of the disk holding
+/// `root`. Its size is bounded by the uncompressed frames (PNG never grows them by more
+/// than a little).
 fn check_space(video: &Path, root: &Path, probe: &Probe, count: u32) -> Result<()> {
     let frame = probe.width as u64 * probe.height as u64 * 3 + 4096;
     let need = frame.saturating_mul(count as u64);
     let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
-    let cap_mb = match std::env::var(DECODED_CAP_ENV) {
-        Err(_) => DECODED_CAP_DEFAULT_MB,
-        Ok(v) => v
-            .trim()
-            .parse::<u64>()
-            .ok()
-            .filter(|&n| n > 0)
-            .ok_or_else(|| {
-                Error::Usage(format!(
-                    "the environment variable {DECODED_CAP_ENV}={v:?} is not a positive whole \
-                 number of MB; set it to one (the default is {DECODED_CAP_DEFAULT_MB}) or unset it"
-                ))
-            })?,
-    };
-    if need > cap_mb.saturating_mul(1 << 20) {
-        return Err(Error::invalid(
-            video,
-            format!(
-                "decoding its {count} selected frames at {}x{} could take {:.0} MB, more than \
-                 the {cap_mb} MB allowed for one video; select fewer frames (`frames: A..B` \
-                 in pipeline.yaml), or raise the cap with {DECODED_CAP_ENV}",
-                probe.width,
-                probe.height,
-                mb(need)
-            ),
-        ));
-    }
+    crate::limits::check_decoded(
+        video,
+        &format!(
+            "decoding its {count} selected frames at {}x{} (select fewer with `frames: A..B` \
+             in pipeline.yaml)",
+            probe.width, probe.height
+        ),
+        need,
+    )?;
     if let Some(free) = free_bytes(root) {
         if need > free {
             return Err(Error::invalid(
