@@ -559,6 +559,19 @@ struct CameraEntry {
     dist: Option<Vec<f64>>,
     R: [[f64; 3]; 3],
     t: [f64; 3],
+    #[serde(default)]
+    crop: Option<CropEntry>,
+}
+
+/// The images are a window of the calibrated image (a crop, or a pad where `left`/`top`
+/// are negative): image pixel (0, 0) is calibrated pixel (`left`, `top`), pixels.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CropEntry {
+    left: i32,
+    top: i32,
+    width: u32,
+    height: u32,
 }
 
 /// Parses cameras.yaml text (`path` only names the file in errors) and validates it.
@@ -629,6 +642,26 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
                 e.name
             ));
         }
+        if let Some(c) = &e.crop {
+            // The camera of the images: the principal point moves with the window.
+            let far = |start: i32, len: u32, of: u32| start as i64 + len as i64 > of as i64 + 64;
+            if c.left.abs() > 64
+                || c.top.abs() > 64
+                || far(c.left, c.width, e.width)
+                || far(c.top, c.height, e.height)
+            {
+                return Err(bad(format!(
+                    "crop {}x{} at ({}, {}) reaches more than 64 pixels outside the calibrated \
+                     {}x{} image: a crop or pad describes images that differ from the \
+                     calibrated ones by a few pixels; for another resolution, calibrate at it",
+                    c.width, c.height, c.left, c.top, e.width, e.height
+                )));
+            }
+            cam.cx -= c.left as f64;
+            cam.cy -= c.top as f64;
+            cam.width = c.width;
+            cam.height = c.height;
+        }
         cam.validate().map_err(|m| bad(m.0))?;
         // A copied entry adds nothing and may hide a missing camera; a warning, not an
         // error: real rings hold such pairs (the Middlebury temple ring's 1st and 11th).
@@ -651,6 +684,24 @@ pub fn parse_cameras(path: &Path, text: &str) -> Result<Calibration> {
         cameras.push(cam);
     }
     Ok(Calibration { cameras, warnings })
+}
+
+/// When images differ from their calibration by a few pixels (a sensor window of 1088
+/// against a video of 1080, say), how to say where they were cut or padded.
+pub fn crop_hint(cam: &Camera, (w, h): (u32, u32)) -> String {
+    let near = |a: u32, b: u32| a.abs_diff(b) <= 64;
+    if !near(w, cam.width) || !near(h, cam.height) {
+        return String::new();
+    }
+    let centred = |of: u32, is: u32| (of as i64 - is as i64) / 2;
+    format!(
+        ". If the images are the calibrated ones cut (or padded) by a few pixels, say where \
+         in calib/cameras.yaml: `crop: {{left: L, top: T, width: {w}, height: {h}}}` on each \
+         such camera, with (L, T) the calibrated pixel that is the images' top-left (centred: \
+         left {}, top {}; at the origin: 0, 0), as docs/dataset-format.md describes",
+        centred(cam.width, w),
+        centred(cam.height, h)
+    )
 }
 
 /// Reads and validates `calib/cameras.yaml`.
@@ -834,6 +885,31 @@ mod tests {
         .to_string();
         assert!(
             err.contains("c.yaml") && err.contains("camera 'a'") && err.contains("not a rotation"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_crop_moves_the_principal_point_and_a_far_one_is_refused() {
+        let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let base = yaml_with_r(identity);
+        let cropped = format!("{base}    crop: {{left: 1, top: -1, width: 3, height: 4}}\n");
+        let calib = parse_cameras(Path::new("c.yaml"), &cropped).unwrap();
+        let cam = &calib.cameras[0];
+        assert_eq!((cam.width, cam.height), (3, 4));
+        assert_eq!((cam.cx, cam.cy), (0.5, 2.0));
+        // The same world point lands one pixel left and one down of where the calibrated
+        // image has it.
+        let whole = &parse_cameras(Path::new("c.yaml"), &base).unwrap().cameras[0];
+        let p = Vector3::new(0.1, 0.2, 1.0);
+        let d = cam.project(&p).unwrap() - whole.project(&p).unwrap();
+        assert!((d.x + 1.0).abs() < 1e-12 && (d.y - 1.0).abs() < 1e-12);
+        let far = format!("{base}    crop: {{left: 100, top: 0, width: 3, height: 3}}\n");
+        let err = parse_cameras(Path::new("c.yaml"), &far)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("camera 'a'") && err.contains("more than 64 pixels"),
             "{err}"
         );
     }

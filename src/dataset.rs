@@ -150,8 +150,11 @@ fn check_size(path: &Path, cam: &Camera, w: u32, h: u32) -> Result<()> {
             path,
             format!(
                 "image is {w}x{h} but camera '{}' is calibrated for {}x{}; \
-                 resize the images or fix width/height in the calibration",
-                cam.name, cam.width, cam.height
+                 resize the images or fix width/height in the calibration{}",
+                cam.name,
+                cam.width,
+                cam.height,
+                crate::camera::crop_hint(cam, (w, h))
             ),
         ));
     }
@@ -295,10 +298,7 @@ impl Sequence {
             };
             use rayon::prelude::*;
             // Every video is probed (and refused by name) before any is decoded.
-            let probes: Vec<crate::video::Probe> = video_cams
-                .par_iter()
-                .map(|(i, path)| crate::video::probe_for(path, &cameras[*i]))
-                .collect::<Result<_>>()?;
+            let probes = crate::video::probe_all(&video_cams, &cameras)?;
             for ((i, path), probe) in video_cams.iter().zip(&probes) {
                 if probe.rotation != 0.0 {
                     warnings.push(format!(
@@ -522,6 +522,7 @@ impl Sequence {
         // (a calibration made at another resolution usually differs for all of them).
         if let (true, Some(&first)) = (self.has_frames, self.frames.first()) {
             let mut wrong = Vec::new();
+            let mut wrong_sizes = Vec::new();
             for (c, cam) in self.cameras.iter().enumerate() {
                 if self.undecoded.contains(&cam.name) {
                     continue;
@@ -529,6 +530,7 @@ impl Sequence {
                 let path = self.frame_path(c, first);
                 if let Ok((w, h)) = image_dimensions(&path) {
                     if (w, h) != (cam.width, cam.height) {
+                        wrong_sizes.push((c, (w, h)));
                         wrong.push(format!(
                             "{} ({w}x{h}, calibrated {}x{})",
                             crate::text::quoted(&cam.name),
@@ -543,9 +545,10 @@ impl Sequence {
                     self.dir.join("frames"),
                     format!(
                         "{} cameras' images are not the size their calibration states: {}; \
-                         resize the images, or fix width/height (and K) in the calibration",
+                         resize the images, or fix width/height (and K) in the calibration{}",
                         wrong.len(),
-                        wrong.join(", ")
+                        wrong.join(", "),
+                        crate::camera::crop_hint(&self.cameras[wrong_sizes[0].0], wrong_sizes[0].1)
                     ),
                 ));
             }

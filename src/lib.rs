@@ -24,6 +24,7 @@ pub mod imageio;
 pub mod joints;
 pub mod limits;
 pub mod maxflow;
+pub mod person;
 pub mod photo;
 pub mod plot;
 pub mod poses;

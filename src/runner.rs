@@ -268,14 +268,36 @@ impl Job {
         let Some(&frame) = self.frames.first() else {
             return Ok(Vec::new());
         };
-        let masks = crate::stages::silhouette::frame_masks(&self.config, seq, &self.cache, frame)?;
-        let p = &self.config.visual_hull;
+        let (masks, person) =
+            crate::stages::silhouette::frame_masks(&self.config, seq, &self.cache, frame)?;
+        let mut p = self.config.visual_hull.clone();
+        if let Some(person) = &person {
+            let points = crate::person::triangulate::triangulate_frame(&seq.cameras, person);
+            println!(
+                "person: found in {} of {} cameras at frame {frame}; {}",
+                person.views.iter().filter(|v| v.found).count(),
+                person.views.len(),
+                crate::person::triangulate::summary(std::slice::from_ref(&points))
+            );
+            if p.bbox.is_none() {
+                p.bbox = crate::person::triangulate::body_box(&points).map(|(lo, hi)| {
+                    crate::recon::visual_hull::BoundingBox {
+                        min: lo.into(),
+                        max: hi.into(),
+                    }
+                });
+            }
+        }
+        let p = &p;
         let cov = crate::recon::silhouette::Coverage::of(&seq.cameras, &masks);
         let full = cov.full_problem(frame, p.all_but, seq.cameras.len());
         let mut out: Vec<String> = full
             .map_err(|m| Error::invalid(&seq.dir, m))?
             .into_iter()
             .collect();
+        if let Some(person) = &person {
+            out.extend(crate::stages::silhouette::person_warnings(person));
+        }
         if !cov.empty.is_empty() {
             out.push(format!(
                 "silhouettes of frame {frame}: camera(s) {} hold no subject pixel, so that \
@@ -299,7 +321,7 @@ impl Job {
                     format!("frame {frame}'s box {:.2?} m: {m}", (hi - lo).as_slice()),
                 )
             })?;
-            if let Some(line) = self.surface_coverage(frame, &masks)? {
+            if let Some(line) = self.surface_coverage(frame, &masks, p)? {
                 out.push(line);
             }
             if p.bbox.is_none() {
@@ -314,9 +336,14 @@ impl Job {
     /// configured voxel, whichever is coarser) at least two cameras see within
     /// [`SEEING_ANGLE_DEG`] of its normal: a warning, with what it means for the stages,
     /// when that is below [`MIN_SEEN_TWICE`]; always one line on stdout.
-    fn surface_coverage(&self, frame: u32, masks: &[image::GrayImage]) -> Result<Option<String>> {
+    fn surface_coverage(
+        &self,
+        frame: u32,
+        masks: &[image::GrayImage],
+        p: &crate::recon::visual_hull::VisualHullParams,
+    ) -> Result<Option<String>> {
         let cams = &self.sequence.cameras;
-        let mut p = self.config.visual_hull.clone();
+        let mut p = p.clone();
         p.voxel_size = p.voxel_size.max(0.02);
         let hull = crate::recon::visual_hull::reconstruct(cams, masks, &p)
             .map_err(|m| Error::invalid(&self.config.path, format!("frame {frame}: {m}")))?;
@@ -598,11 +625,10 @@ pub fn run(job: &Job, opts: &RunOptions) -> Result<Vec<StageReport>> {
     Ok(reports)
 }
 
-/// Whether a stage makes one artifact per frame, each from that frame alone.
+/// Whether a stage makes one artifact per frame, each from that frame alone (its
+/// sequence-level step, if any, runs once all frames are done).
 fn is_per_frame(stage: &StageDef) -> bool {
-    stage.scope == Scope::PerFrame
-        && matches!(stage.compute, Compute::Frame(_))
-        && stage.finish.is_none()
+    stage.scope == Scope::PerFrame && matches!(stage.compute, Compute::Frame(_))
 }
 
 /// A frame's artifact computed by a stage: its warnings and the seconds it took.
@@ -772,20 +798,26 @@ impl StageRun<'_> {
             .collect();
         let total: f64 = compute.iter().sum();
         let mut done = done;
-        Ok(group
+        group
             .iter()
             .zip(pending)
             .enumerate()
             .map(|(k, (&(stage, _), p))| {
-                let warnings = done
+                let mut warnings: Vec<Vec<String>> = done
                     .iter_mut()
                     .filter_map(|d| d[k].take())
                     .map(|d| d.0)
                     .collect();
                 let share = if total > 0.0 { compute[k] / total } else { 0.0 };
-                self.report(stage, p, wall * share, warnings, Vec::new())
+                let mut outputs = Vec::new();
+                if let Some(finish) = stage.finish {
+                    let finished = finish(self.ctx, &self.job.stage_frames(stage, self.reference))?;
+                    outputs = finished.outputs;
+                    warnings.push(finished.warnings);
+                }
+                Ok(self.report(stage, p, wall * share, warnings, outputs))
             })
-            .collect())
+            .collect()
     }
 
     /// Runs one stage over its frames: the reference stage on t0,

@@ -314,25 +314,51 @@ pub fn progress() -> indicatif::ProgressBar {
     bar
 }
 
-/// The probe of `video` for camera `cam`, whose stored frame size must be the camera's.
-pub fn probe_for(video: &Path, cam: &Camera) -> Result<Probe> {
-    let probe = probe(video)?;
-    if (probe.width, probe.height) != (cam.width, cam.height) {
-        return Err(Error::invalid(
-            video,
+/// The probes of `videos`, one per camera of `cameras` (in parallel), each video's stored
+/// frame size checked against its camera's: every camera whose video has another size is
+/// named at once.
+pub fn probe_all(videos: &[(usize, PathBuf)], cameras: &[Camera]) -> Result<Vec<Probe>> {
+    use rayon::prelude::*;
+    let probes: Vec<Probe> = videos
+        .par_iter()
+        .map(|(_, path)| probe(path))
+        .collect::<Result<_>>()?;
+    let wrong: Vec<String> = videos
+        .iter()
+        .zip(&probes)
+        .filter(|((i, _), p)| (p.width, p.height) != (cameras[*i].width, cameras[*i].height))
+        .map(|((i, path), p)| {
             format!(
-                "the video is {}x{} but camera {} is calibrated for {}x{}; this is another \
-                 camera's video, or the calibration's width/height is wrong",
-                probe.width,
-                probe.height,
-                crate::text::quoted(&cam.name),
-                cam.width,
-                cam.height
+                "{} is {}x{} but camera {} is calibrated for {}x{}",
+                crate::text::shown_path(path),
+                p.width,
+                p.height,
+                crate::text::quoted(&cameras[*i].name),
+                cameras[*i].width,
+                cameras[*i].height
+            )
+        })
+        .collect();
+    if let Some(((i, path), p)) = videos
+        .iter()
+        .zip(&probes)
+        .find(|((i, _), p)| (p.width, p.height) != (cameras[*i].width, cameras[*i].height))
+    {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "{} video(s) are not the size their camera is calibrated for: {}; these are \
+                 other cameras' videos, or the calibration's width/height is wrong{}",
+                wrong.len(),
+                wrong.join("; "),
+                crate::camera::crop_hint(&cameras[*i], (p.width, p.height))
             ),
         ));
     }
-    crate::limits::check_image(video, probe.width, probe.height)?;
-    Ok(probe)
+    for ((_, path), p) in videos.iter().zip(&probes) {
+        crate::limits::check_image(path, p.width, p.height)?;
+    }
+    Ok(probes)
 }
 
 /// Camera `cam`'s video with the video frames `window` decoded under `root`

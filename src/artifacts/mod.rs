@@ -4,7 +4,7 @@
 //!
 //! | artifact | stage folder | files per frame |
 //! |---|---|---|
-//! | [`silhouettes`] | `silhouette` | `NNNNNN/<camera>.png` |
+//! | [`silhouettes`] | `silhouette` | `NNNNNN/<camera>.png`; method `person`: [`person`]'s `NNNNNN/person.yaml` |
 //! | [`learned_background`] (method `learned`) | `learned_background/<key>` | per capture: `cameras/<camera>/{plate,share,subject,chroma}.png`, `learned.yaml` (with every file's size and hash) |
 //! | [`reconstruction`] (hull) | `visual_hull` | `NNNNNN.ply`, `NNNNNN.grid`, `NNNNNN.band` |
 //! | [`reconstruction`] (refined) | `graphcut` | `NNNNNN.ply`, `NNNNNN.grid` |
@@ -19,6 +19,7 @@ pub mod body_model;
 pub mod fitted;
 pub mod learned_background;
 pub mod observation;
+pub mod person;
 pub mod reconstruction;
 pub mod silhouettes;
 

@@ -22,11 +22,16 @@ pub struct Silhouettes {
     pub cameras: Vec<String>,
     /// Their masks (255 = subject).
     pub masks: Vec<GrayImage>,
+    /// Method `person`: what the person model found in each view.
+    pub person: Option<super::person::PersonFrame>,
 }
 
 impl super::Artifact for Silhouettes {
     fn write(&self, dir: &Path, frame: u32) -> Result<Vec<String>> {
-        let mut files = Vec::with_capacity(self.masks.len());
+        let mut files = Vec::with_capacity(self.masks.len() + 1);
+        if let Some(person) = &self.person {
+            files.push(super::person::write(person, dir, frame)?);
+        }
         for (name, mask) in self.cameras.iter().zip(&self.masks) {
             let rel = file(frame, name);
             crate::imageio::write_gray(&dir.join(&rel), mask)?;

@@ -30,13 +30,18 @@ pub enum SilhouetteMethod {
     /// Subtraction of a plate learned from the frames themselves, for captures without
     /// plates where the subject moves through the view ([`super::learned_background`]).
     Learned,
+    /// A learned person model's mask in each image ([`crate::person`]), made consistent
+    /// across the cameras: for captures of one person without masks or plates.
+    Person,
 }
 
 /// Parameters of the silhouette stage (pipeline.yaml key `silhouette`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SilhouetteParams {
-    /// Source of the masks: auto, masks or background. Default auto.
+    /// Source of the masks: auto, masks, background, constant, learned or person. Default
+    /// auto: the given masks, else background subtraction with the plates, else the person
+    /// model (when it is set up).
     pub method: SilhouetteMethod,
     /// Chromaticity distortion above which a pixel is foreground, 8-bit levels. Default 12.
     pub color_threshold: f64,

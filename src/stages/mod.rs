@@ -122,6 +122,12 @@ impl Inputs<'_> {
         crate::artifacts::silhouettes::read(self.cache, frame, &self.sequence.cameras)
     }
 
+    /// A frame's person evidence (silhouette method `person`), `None` for other methods.
+    pub fn person(&self, frame: u32) -> Result<Option<crate::artifacts::person::PersonFrame>> {
+        self.declared(crate::artifacts::silhouettes::STAGE)?;
+        crate::artifacts::person::read(self.cache, frame)
+    }
+
     /// Camera `cam`'s learned background, from the plates with `key` (the silhouette
     /// stage's settings hold it, so its key covers them).
     pub fn learned_plate(
@@ -357,7 +363,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: 1,
         sources: silhouette::sources,
         compute: Compute::Frame(&silhouette::STAGE),
-        finish: None,
+        finish: Some(silhouette::finish),
     },
     StageDef {
         name: Surface::Hull.stage(),
@@ -461,6 +467,11 @@ pub fn plan_notes(ctx: &Context) -> Result<Vec<String>> {
         SilhouetteMethod::Learned => {
             "subtraction of background plates learned from the frames (no plates given)"
         }
+        SilhouetteMethod::Person if ctx.config.silhouette.method == SilhouetteMethod::Auto => {
+            "the person model's masks, made consistent across cameras (no masks and no plates \
+             given, and the person model is set up)"
+        }
+        SilhouetteMethod::Person => "the person model's masks, made consistent across cameras",
         _ => "background subtraction against the plates (background/)",
     };
     let photo = seq.has_frames;

@@ -3,6 +3,7 @@
 
 use super::{Inputs, PerFrame, Produced};
 use crate::artifacts::learned_background::{self, CameraShares, LearnedInfo};
+use crate::artifacts::person::PersonFrame;
 use crate::artifacts::silhouettes::Silhouettes;
 use crate::cache::KeyBuilder;
 use crate::config::Config;
@@ -20,16 +21,30 @@ pub struct Settings {
     /// Method `learned`: the key of the learned plates (which holds the content of every
     /// frame they were learned from, [`learn_plates`]).
     pub learned_plates: Option<String>,
+    /// Method `person`: the person model's fingerprint (its files' content) and the carving
+    /// that makes its masks consistent across cameras.
+    pub person_model: Option<String>,
+    pub person_hull: Option<crate::recon::visual_hull::VisualHullParams>,
 }
 
 /// The stage.
 pub static STAGE: PerFrame<Settings> = PerFrame { resolve, compute };
 
 fn resolve(config: &Config, sequence: &Sequence) -> Result<Settings> {
+    let method = resolve_method(config, sequence)?;
+    let person = method == SilhouetteMethod::Person;
     Ok(Settings {
-        method: resolve_method(config, sequence)?,
+        method,
         params: config.silhouette.clone(),
         learned_plates: sequence.learned_plates.clone(),
+        person_model: if person {
+            Some(crate::person::model::fingerprint(
+                &crate::person::model::folder(),
+            )?)
+        } else {
+            None
+        },
+        person_hull: person.then(|| config.visual_hull.clone()),
     })
 }
 
@@ -37,6 +52,15 @@ fn resolve(config: &Config, sequence: &Sequence) -> Result<Settings> {
 pub fn resolve_method(config: &Config, seq: &Sequence) -> Result<SilhouetteMethod> {
     let method = match config.silhouette.method {
         SilhouetteMethod::Auto if seq.has_masks => SilhouetteMethod::Masks,
+        SilhouetteMethod::Auto if seq.has_backgrounds || !seq.has_frames => {
+            SilhouetteMethod::Background
+        }
+        // Neither masks nor plates: a person model finds the subject without either.
+        SilhouetteMethod::Auto
+            if crate::person::model::is_set_up(&crate::person::model::folder()) =>
+        {
+            SilhouetteMethod::Person
+        }
         SilhouetteMethod::Auto => SilhouetteMethod::Background,
         m => m,
     };
@@ -45,7 +69,10 @@ pub fn resolve_method(config: &Config, seq: &Sequence) -> Result<SilhouetteMetho
             seq.dir.join("masks"),
             "silhouette.method is 'masks' but the sequence has no masks/ folder",
         )),
-        SilhouetteMethod::Background | SilhouetteMethod::Constant | SilhouetteMethod::Learned
+        SilhouetteMethod::Background
+        | SilhouetteMethod::Constant
+        | SilhouetteMethod::Learned
+        | SilhouetteMethod::Person
             if !seq.has_frames =>
         {
             Err(Error::invalid(
@@ -56,8 +83,15 @@ pub fn resolve_method(config: &Config, seq: &Sequence) -> Result<SilhouetteMetho
         }
         SilhouetteMethod::Background if !seq.has_backgrounds => Err(Error::invalid(
             seq.dir.join("background"),
-            "background subtraction needs a plate background/<camera>.png for every camera \
-             (or given masks in masks/<camera>/)",
+            format!(
+                "background subtraction needs a plate background/<camera>.png for every camera \
+                 (or given masks in masks/<camera>/). A capture of one person without either \
+                 takes its silhouettes from the person model (silhouette.method 'person', which \
+                 'auto' picks once it is set up: `bash tools/setup-person-model.sh`, into {} \
+                 or the folder ${})",
+                crate::text::shown_path(&crate::person::model::folder()),
+                crate::person::model::FOLDER_VARIABLE
+            ),
         )),
         m => Ok(m),
     }
@@ -71,7 +105,7 @@ pub(super) fn sources(ctx: &super::Context, frame: u32, key: &mut KeyBuilder) ->
         match method {
             SilhouetteMethod::Masks => key.add_file(&seq.mask_path(c, frame))?,
             // The learned plates' key (in the settings) holds what they were learned from.
-            SilhouetteMethod::Constant | SilhouetteMethod::Learned => {
+            SilhouetteMethod::Constant | SilhouetteMethod::Learned | SilhouetteMethod::Person => {
                 key.add_file(&seq.frame_path(c, frame))?
             }
             _ => key
@@ -83,7 +117,7 @@ pub(super) fn sources(ctx: &super::Context, frame: u32, key: &mut KeyBuilder) ->
 }
 
 fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
-    let masks = masks(
+    let (masks, person) = masks(
         s,
         inputs.sequence,
         |key, c| inputs.learned_plate(key, c),
@@ -95,17 +129,26 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
         .iter()
         .map(|c| c.name.clone())
         .collect();
-    Ok(Produced::new(Silhouettes { cameras, masks }, Vec::new()))
+    let warnings = person.as_ref().map(person_warnings).unwrap_or_default();
+    Ok(Produced::new(
+        Silhouettes {
+            cameras,
+            masks,
+            person,
+        },
+        warnings,
+    ))
 }
 
-/// Frame `frame`'s silhouettes as the stage computes them, written nowhere (for `pipeline
+/// Frame `frame`'s silhouettes (and method `person`'s evidence) as the stage computes them,
+/// written nowhere (for `pipeline
 /// check`, which inspects the first selected frame before any stage runs).
 pub fn frame_masks(
     config: &Config,
     seq: &Sequence,
     cache: &crate::cache::Cache,
     frame: u32,
-) -> Result<Vec<image::GrayImage>> {
+) -> Result<(Vec<image::GrayImage>, Option<PersonFrame>)> {
     let s = resolve(config, seq)?;
     masks(
         &s,
@@ -115,6 +158,50 @@ pub fn frame_masks(
     )
 }
 
+/// Above this share of a camera's person mask without support from the other cameras, the
+/// mask (or the calibration) is suspect.
+const MAX_UNSUPPORTED: f64 = 0.1;
+
+/// The person model's findings a user should know of: cameras where nobody was found, and
+/// masks largely unsupported by the other cameras.
+pub fn person_warnings(frame: &PersonFrame) -> Vec<String> {
+    let mut out = Vec::new();
+    let missing: Vec<String> = frame
+        .views
+        .iter()
+        .filter(|v| !v.found)
+        .map(|v| crate::text::quoted(&v.camera))
+        .collect();
+    if !missing.is_empty() {
+        out.push(format!(
+            "the person model found nobody in camera(s) {}: their silhouettes are the whole \
+             image and carve nothing",
+            missing.join(", ")
+        ));
+    }
+    let unsupported: Vec<String> = frame
+        .views
+        .iter()
+        .filter(|v| v.found && v.unsupported > MAX_UNSUPPORTED)
+        .map(|v| {
+            format!(
+                "{} ({:.0}%)",
+                crate::text::quoted(&v.camera),
+                100.0 * v.unsupported
+            )
+        })
+        .collect();
+    if !unsupported.is_empty() {
+        out.push(format!(
+            "the person masks of camera(s) {} lie partly where no other camera sees the \
+             person (dropped): a second person, a reflection, or a calibration that does not \
+             fit these videos",
+            unsupported.join(", ")
+        ));
+    }
+    out
+}
+
 /// Every camera's silhouette of `frame` under the settings `s`; `plate(key, c)` reads
 /// camera c's learned plate.
 fn masks(
@@ -122,8 +209,26 @@ fn masks(
     seq: &Sequence,
     plate: impl Fn(&str, usize) -> Result<crate::recon::learned_background::Learned>,
     frame: u32,
-) -> Result<Vec<image::GrayImage>> {
+) -> Result<(Vec<image::GrayImage>, Option<PersonFrame>)> {
     let p = &s.params;
+    if s.method == SilhouetteMethod::Person {
+        let images: Vec<image::RgbImage> = (0..seq.cameras.len())
+            .map(|c| seq.load_frame(c, frame))
+            .collect::<Result<_>>()?;
+        let hull = s.person_hull.as_ref().ok_or_else(|| {
+            Error::Usage(
+                "silhouette.method 'person' without its settings (a defect of hullpose)".into(),
+            )
+        })?;
+        let (masks, person) = crate::person::evidence::frame_evidence(&seq.cameras, &images, hull)
+            .map_err(|e| match e {
+                Error::Usage(m) => {
+                    Error::invalid(seq.dir.join("frames"), format!("frame {frame}: {m}"))
+                }
+                e => e,
+            })?;
+        return Ok((masks, Some(person)));
+    }
     let mut masks = Vec::with_capacity(seq.cameras.len());
     for c in 0..seq.cameras.len() {
         let mask = match s.method {
@@ -161,7 +266,7 @@ fn masks(
         };
         masks.push(mask);
     }
-    Ok(masks)
+    Ok((masks, None))
 }
 
 /// The most frames a plate is learned from (evenly spread over the selected range): enough
@@ -342,6 +447,36 @@ fn refuse_undecided(config: &Config, info: &LearnedInfo) -> Result<()> {
             info.frames.len()
         ),
     ))
+}
+
+/// The file of the triangulated body keypoints in the output folder.
+pub const KEYPOINTS_FILE: &str = "keypoints3d.csv";
+
+/// Method `person`: the body keypoints of every frame, triangulated, into
+/// `output/keypoints3d.csv`, with a summary of their reprojection errors.
+pub(super) fn finish(ctx: &super::Context, frames: &[u32]) -> Result<super::Finished> {
+    if resolve_method(ctx.config, ctx.sequence)? != SilhouetteMethod::Person {
+        return Ok(super::Finished::default());
+    }
+    let mut frames = frames.to_vec();
+    frames.sort_unstable();
+    let mut text = format!("{}\n", crate::person::triangulate::CSV_HEADER);
+    let mut all = Vec::with_capacity(frames.len());
+    for &f in &frames {
+        let Some(person) = crate::artifacts::person::read(ctx.cache, f)? else {
+            continue;
+        };
+        let points = crate::person::triangulate::triangulate_frame(&ctx.sequence.cameras, &person);
+        text += &crate::person::triangulate::csv_rows(f, &points);
+        all.push(points);
+    }
+    let path = ctx.config.output.join(KEYPOINTS_FILE);
+    crate::fsutil::write_atomic(&path, text.as_bytes())?;
+    Ok(super::Finished {
+        outputs: vec![path],
+        files: 1,
+        warnings: vec![crate::person::triangulate::summary(&all)],
+    })
 }
 
 /// One line on the learned plates, for `pipeline check` and the run's summary.

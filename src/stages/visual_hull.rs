@@ -28,6 +28,22 @@ fn compute(p: &VisualHullParams, inputs: &Inputs, frame: u32) -> Result<Produced
     let cameras = &inputs.sequence.cameras;
     let masks = inputs.silhouettes(frame)?;
     let mut warnings = Vec::new();
+    // A person's triangulated keypoints bound the box far better than few cameras' cones.
+    let mut with_box;
+    let p = match (&p.bbox, inputs.person(frame)?) {
+        (None, Some(person)) => {
+            let points = crate::person::triangulate::triangulate_frame(cameras, &person);
+            with_box = p.clone();
+            with_box.bbox = crate::person::triangulate::body_box(&points).map(|(lo, hi)| {
+                visual_hull::BoundingBox {
+                    min: lo.into(),
+                    max: hi.into(),
+                }
+            });
+            &with_box
+        }
+        _ => p,
+    };
     let coverage = Coverage::of(cameras, &masks);
     let full = coverage.full_problem(frame, p.all_but, cameras.len());
     warnings.extend(full.map_err(|m| Error::invalid(&inputs.sequence.dir, m))?);

@@ -24,6 +24,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("skeleton", 0),
     ("fit", 0),
     ("recon", 0),
+    ("person", 0),
     ("joints", 0),
     ("poses", 0),
     ("dataset", 1),

@@ -32,6 +32,7 @@ mod learned_background;
 mod masks_only;
 mod model;
 mod parameter_table;
+mod person_model;
 mod pose_search;
 mod quick_start;
 mod realdata;
