@@ -308,10 +308,28 @@ pub fn min_cut_occupancy_timed(
         }
     }
     if p.pin_rims {
-        keep_silhouettes(grid, occupied, &mut out, cams, silhouettes);
+        keep_silhouettes(grid, occupied, &mut out, cams, silhouettes, 0);
+    } else if !silhouettes.is_empty() {
+        // Never carve away what every silhouette confirms: a thin limb the photo-consistency
+        // cannot hold (few cameras, no texture) is put back where its carving uncovers more
+        // than a sliver of a silhouette.
+        keep_silhouettes(
+            grid,
+            occupied,
+            &mut out,
+            cams,
+            silhouettes,
+            LIMB_CORE_RADIUS_PX,
+        );
     }
     out
 }
+
+/// Silhouette pixels uncovered by the cut count for [`keep_silhouettes`]'s limb guarantee
+/// only where the whole square of this radius around them is uncovered, pixels: a band
+/// under 5 px wide along an outline (the cut moving a rim inward by a voxel or two, which
+/// the refinement is for) is left carved; a limb carved away is not.
+pub const LIMB_CORE_RADIUS_PX: usize = 2;
 
 /// Per band voxel, the factor (0 or 1) of its ballooning link: 0 where the images show a
 /// surface behind the voxel, i.e. a band voxel deeper along the hull's inward normal (within
@@ -397,12 +415,16 @@ fn on_rim(cams: &[Camera], outlines: &[Vec<bool>], x: &Vector3<f64>) -> bool {
 /// the voxel appears (so pixels at the edge of a projection count as uncovered: the meshed
 /// surface's outline lies between voxel centres). Where the hull explained a silhouette, the
 /// refined volume still does.
+///
+/// With `core_radius` r > 0 only pixels whose (2r+1)-square is wholly uncovered count (the
+/// cores of what the cut uncovered), so slivers along outlines stay carved.
 fn keep_silhouettes(
     grid: &GridSpec,
     hull: &[bool],
     refined: &mut [bool],
     cams: &[Camera],
     silhouettes: &[image::GrayImage],
+    core_radius: usize,
 ) {
     let hull_voxels: Vec<usize> = (0..grid.len()).filter(|&i| hull[i]).collect();
     // The square of pixels a voxel covers in a camera, clipped to the image.
@@ -438,7 +460,21 @@ fn keep_silhouettes(
                     }
                 }
             }
-            let uncovered = |k: usize| covered[k] == 1 && mask.as_raw()[k] >= 128;
+            let uncovered: Vec<bool> = covered
+                .iter()
+                .zip(mask.as_raw())
+                .map(|(&c, &m)| c == 1 && m >= 128)
+                .collect();
+            let uncovered = erode(
+                &uncovered,
+                cam.width as usize,
+                cam.height as usize,
+                core_radius,
+            );
+            if !uncovered.iter().any(|&u| u) {
+                return Vec::new();
+            }
+            let uncovered = |k: usize| uncovered[k];
             hull_voxels
                 .iter()
                 .zip(&prints)
@@ -464,6 +500,44 @@ fn keep_silhouettes(
     for (i, r) in refined.iter_mut().enumerate() {
         *r |= hull[i] && near_restored[i] > 0.0;
     }
+}
+
+/// `set` eroded by the (2r+1)-square (separable): true where the whole square is.
+fn erode(set: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
+    if r == 0 {
+        return set.to_vec();
+    }
+    let run = |line: &[bool]| -> Vec<bool> {
+        // Length of the run of trues ending at each index, then whether the window fits.
+        let n = line.len();
+        let mut out = vec![false; n];
+        let mut ones = 0usize;
+        let mut runs = vec![0usize; n];
+        for (i, &v) in line.iter().enumerate() {
+            ones = if v { ones + 1 } else { 0 };
+            runs[i] = ones;
+        }
+        for (i, o) in out.iter_mut().enumerate() {
+            let end = i + r;
+            *o = end < n && runs[end] > 2 * r;
+        }
+        out
+    };
+    let mut rows = vec![false; w * h];
+    for y in 0..h {
+        rows[y * w..(y + 1) * w].copy_from_slice(&run(&set[y * w..(y + 1) * w]));
+    }
+    let mut out = vec![false; w * h];
+    let mut column = vec![false; h];
+    for x in 0..w {
+        for y in 0..h {
+            column[y] = rows[y * w + x];
+        }
+        for (y, v) in run(&column).into_iter().enumerate() {
+            out[y * w + x] = v;
+        }
+    }
+    out
 }
 
 /// Maximum of `values` over the (2r+1)^3 box around every voxel (separable).
@@ -627,4 +701,25 @@ pub fn mean_vertex_consistency(
         scores.iter().sum::<f64>() / scores.len().max(1) as f64,
         scores.len(),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn erosion_keeps_only_wide_cores() {
+        // A 7-wide band (x 0..7) and a 3-wide sliver (x 9..12) in a 12x12 image.
+        let (w, h) = (12, 12);
+        let set: Vec<bool> = (0..w * h).map(|k| k % w < 7 || k % w >= 9).collect();
+        let e = erode(&set, w, h, 2);
+        for y in 0..h {
+            for x in 0..w {
+                // The band's core, away from the image's border by the radius.
+                let core = (2..h - 2).contains(&y) && (2..5).contains(&x);
+                assert_eq!(e[y * w + x], core, "({x}, {y})");
+            }
+        }
+        assert_eq!(erode(&set, w, h, 0), set);
+    }
 }

@@ -79,12 +79,8 @@ fn compute(s: &Settings, inputs: &Inputs, frame: u32) -> Result<Produced> {
         ));
         spinner.tick();
     };
-    // The silhouettes pin the rims; nothing else in the cut reads them.
-    let masks = if p.pin_rims {
-        inputs.silhouettes(frame)?
-    } else {
-        Vec::new()
-    };
+    // The silhouettes pin the rims (`pin_rims`) or keep the limbs they confirm.
+    let masks = inputs.silhouettes(frame)?;
     let labels = graphcut::min_cut_occupancy(
         &grid,
         &occupied,

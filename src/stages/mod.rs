@@ -380,7 +380,7 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "graph-cut multi-view stereo refinement of the hull",
         inputs: &["silhouette", "visual_hull"],
-        format_version: 16,
+        format_version: 17,
         sources: graphcut::sources,
         compute: Compute::Frame(&graphcut::STAGE),
         finish: None,
