@@ -8,6 +8,7 @@
 use crate::common;
 
 use common::*;
+use hullpose::synth::{SceneKind, SynthOptions};
 use std::path::Path;
 
 /// Whether the person model is set up; without it these tests say so and pass, unless
@@ -195,5 +196,34 @@ fn a_lab_capture_without_masks_or_plates_is_found_by_the_person_model() {
             cut > hull - 0.01,
             "frame {frame}: graph cut {cut} against the hull's {hull}"
         );
+    }
+}
+
+/// The synthetic humanoid (8 cameras, 640x480): the person model finds it in every view
+/// and its masks, made consistent, match the true masks with IoU 0.93-0.97 (bound 0.9).
+#[test]
+fn the_person_models_masks_match_the_synthetic_humanoids() {
+    if !have_person_model() {
+        return;
+    }
+    let dir = process_tempdir();
+    let d = dir.path();
+    let mut options = SynthOptions::new(SceneKind::Humanoid, d);
+    (options.cameras, options.width, options.height) = (8, 640, 480);
+    options.frames = Some(2);
+    hullpose::synth::generate(&options).unwrap();
+    let mut yaml = std::fs::read_to_string(d.join("pipeline.yaml")).unwrap();
+    yaml += "silhouette:\n  method: person\n";
+    std::fs::write(d.join("pipeline.yaml"), yaml).unwrap();
+    let (ok, _, err) = run_cli(&["run", "pipeline.yaml", "--until", "silhouette"], d);
+    assert!(ok, "{err}");
+    for frame in ["000000", "000001"] {
+        for c in 0..8 {
+            let read = |p: std::path::PathBuf| image::open(p).unwrap().into_luma8();
+            let ours = read(d.join(format!("cache/silhouette/{frame}/cam0{c}.png")));
+            let truth = read(d.join(format!("data/humanoid/masks/cam0{c}/{frame}.png")));
+            let iou = mask_iou(&ours, &truth);
+            assert!(iou >= 0.9, "frame {frame}, cam0{c}: IoU {iou}");
+        }
     }
 }
