@@ -2,7 +2,7 @@
 //! table (benchmarks live here, never in tests).
 
 use crate::artifacts::reconstruction::{self, Surface};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::geometry::isosurface::{self, ScalarGrid};
 use crate::recon::visual_hull::{self, MaskCounts};
 use crate::runner::Job;
@@ -188,6 +188,79 @@ pub fn graphcut(job: &Job, frame: u32) -> Result<String> {
         "hull on the cones (band)", t_band * 1e3,
         "mesh", t_mesh * 1e3,
     ))
+}
+
+/// Times the person model on one frame: loading it, then per camera's image the detector
+/// alone and the whole (detector, crop, landmarks, the mask at full size) on one thread (the
+/// best of `repeat`), then all the frame's images on every thread (one model per thread).
+pub fn person(job: &Job, frame: u32, repeat: usize) -> Result<String> {
+    use crate::person::PersonModel;
+    use rayon::prelude::*;
+    let cams = &job.sequence.cameras;
+    let images: Vec<image::RgbImage> = (0..cams.len())
+        .map(|c| job.sequence.load_frame(c, frame))
+        .collect::<Result<_>>()?;
+    let dir = crate::person::model::folder();
+    let t = Instant::now();
+    let mut model = PersonModel::load(&dir)?;
+    let t_load = t.elapsed().as_secs_f64();
+    let mut out = format!(
+        "person model, frame {frame}, {} cameras: loaded in {:.0} ms\n{:>12} {:>11} {:>8} {:>7} {:>6}\n",
+        cams.len(),
+        t_load * 1e3,
+        "camera",
+        "size",
+        "detector",
+        "whole",
+        "found"
+    );
+    let (mut sum_detect, mut sum_whole) = (0.0, 0.0);
+    for (cam, img) in cams.iter().zip(&images) {
+        let (mut detect, mut whole, mut found) = (f64::INFINITY, f64::INFINITY, false);
+        for _ in 0..repeat {
+            let t = Instant::now();
+            model.detect(img)?;
+            detect = detect.min(t.elapsed().as_secs_f64());
+            let t = Instant::now();
+            found = model.find(img)?.is_some();
+            whole = whole.min(t.elapsed().as_secs_f64());
+        }
+        sum_detect += detect;
+        sum_whole += whole;
+        out += &format!(
+            "{:>12} {:>11} {:>5.1} ms {:>4.1} ms {:>6}\n",
+            crate::text::escape_controls(&cam.name),
+            format!("{}x{}", img.width(), img.height()),
+            detect * 1e3,
+            whole * 1e3,
+            if found { "yes" } else { "no" }
+        );
+    }
+    let n = cams.len() as f64;
+    let t = Instant::now();
+    let all: Vec<bool> = images
+        .par_iter()
+        .map_init(
+            || PersonModel::load(&dir),
+            |model, img| -> Result<bool> {
+                let model = model.as_mut().map_err(|e| Error::Usage(e.to_string()))?;
+                Ok(model.find(img)?.is_some())
+            },
+        )
+        .collect::<Result<_>>()?;
+    let t_all = t.elapsed().as_secs_f64();
+    out += &format!(
+        "one thread: {:.1} ms per image (detector {:.1} ms); all {} images on {} threads: {:.2} s \
+         ({:.1} ms per image, model loading included), a person in {}\n",
+        sum_whole / n * 1e3,
+        sum_detect / n * 1e3,
+        images.len(),
+        rayon::current_num_threads(),
+        t_all,
+        t_all / n * 1e3,
+        all.iter().filter(|&&f| f).count()
+    );
+    Ok(out)
 }
 
 /// Times the reliability stage's steps on one frame: image loading and smoothing, depth

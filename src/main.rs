@@ -306,6 +306,17 @@ enum BenchWhat {
         #[arg(long, default_value_t = 0)]
         frame: u32,
     },
+    /// The person model on one frame's images (silhouette method `person`): model loading,
+    /// then per image the detector alone and the whole (detector, landmarks, full-size mask),
+    /// on one thread, then every camera's image on all threads.
+    Person {
+        file: PathBuf,
+        #[arg(long, default_value_t = 0)]
+        frame: u32,
+        /// Repetitions; the best time is reported.
+        #[arg(long, default_value_t = 3, value_parser = count::<1, 1000>)]
+        repeat: usize,
+    },
     /// The max-flow solver on the reference fixture graph of size N^3.
     Maxflow {
         #[arg(long, default_value_t = 64, value_parser = count::<2, 256>)]
@@ -606,6 +617,14 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             }
             BenchWhat::Nearest { points, queries } => {
                 print!("{}", hullpose::bench::nearest(points, queries))
+            }
+            BenchWhat::Person {
+                file,
+                frame,
+                repeat,
+            } => {
+                let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;
+                print!("{}", hullpose::bench::person(&job, frame, repeat)?);
             }
             BenchWhat::Maxflow { size } => print!("{}", hullpose::bench::maxflow_fixture(size)),
             BenchWhat::Meshing { size, repeat } => {
