@@ -54,6 +54,8 @@ pub struct Written {
     /// The share of the surface far from every bone
     /// ([`crate::skeleton::embed::Embedding::uncovered_share`]).
     pub uncovered_share: f64,
+    /// Without `export.up_axis`: the up direction found and its cues (one line).
+    pub up_found: Option<String>,
 }
 
 /// A frame `pipeline skeleton` examined.
@@ -244,15 +246,17 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
             path.display()
         )));
     }
-    let up = job.config.export.up_axis.ok_or_else(|| {
-        Error::Usage(
-            "pipeline skeleton needs the world's up direction: set export.up_axis in \
-             pipeline.yaml (for example +z or -y), so that the skeleton stands upright"
-                .into(),
-        )
-    })?;
+    // The world's up: pipeline.yaml's, else as the cameras show it.
+    let (up, up_found) = match job.config.export.up_axis {
+        Some(axis) => (crate::geometry::axes::up_vector(axis), None),
+        None => {
+            let e = crate::geometry::up::estimate(&seq.cameras, None).ok_or_else(|| {
+                Error::Usage("pipeline skeleton: the capture has no cameras".into())
+            })?;
+            (e.up, Some(e.describe()))
+        }
+    };
     let template = template.load()?;
-    let up = crate::geometry::axes::up_vector(up);
     let candidates = match frame {
         Some(f) if !job.frames.contains(&f) => {
             return Err(Error::Usage(
@@ -333,6 +337,7 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
     });
     let limb_lengths = limb_lengths(&skeleton);
     Ok(Written {
+        up_found,
         least_seen_joint,
         limb_lengths,
         uncovered_share,

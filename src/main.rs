@@ -234,7 +234,7 @@ enum Command {
     /// Make the sequence's skeleton.yaml: reconstruct the reference frame and embed a
     /// template skeleton in its surface (bones along the medial axis, the template's
     /// proportions). Writes output/skeleton/bones.ply and output/skeleton/overlay.png to
-    /// check it. Needs export.up_axis in pipeline.yaml.
+    /// check it. The world's up is export.up_axis, or else found from the cameras (printed).
     Skeleton {
         /// The pipeline.yaml naming the calibration and the sequence.
         file: PathBuf,
@@ -758,6 +758,9 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             job.sequence.skeleton_ignored = force;
             let template = hullpose::autoskeleton::Template::parse(&template);
             let w = hullpose::autoskeleton::make(&job, &template, frame, force)?;
+            if let Some(up) = &w.up_found {
+                println!("{up}");
+            }
             if w.candidates.len() > 1 {
                 println!("frames examined (score: the share of joints every view's silhouette holds, less the surface left unexplained and the left/right limb difference):");
                 for c in &w.candidates {

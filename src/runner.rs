@@ -271,8 +271,10 @@ impl Job {
         let (masks, person) =
             crate::stages::silhouette::frame_masks(&self.config, seq, &self.cache, frame)?;
         let mut p = self.config.visual_hull.clone();
+        let mut standing = None;
         if let Some(person) = &person {
             let points = crate::person::triangulate::triangulate_frame(&seq.cameras, person);
+            standing = crate::person::triangulate::standing_axis(&points);
             println!(
                 "person: found in {} of {} cameras at frame {frame}; {}",
                 person.views.iter().filter(|v| v.found).count(),
@@ -289,12 +291,14 @@ impl Job {
             }
         }
         let p = &p;
+        let up_warnings = self.report_up(standing);
         let cov = crate::recon::silhouette::Coverage::of(&seq.cameras, &masks);
         let full = cov.full_problem(frame, p.all_but, seq.cameras.len());
         let mut out: Vec<String> = full
             .map_err(|m| Error::invalid(&seq.dir, m))?
             .into_iter()
             .collect();
+        out.extend(up_warnings);
         if let Some(person) = &person {
             out.extend(crate::stages::silhouette::person_warnings(person));
         }
@@ -330,6 +334,47 @@ impl Job {
             }
         }
         Ok(out)
+    }
+
+    /// The world's up as the capture shows it (the cameras, and the subject's `standing`
+    /// axis where the person model saw it), on stdout; warnings when its cues disagree, or
+    /// when `export.up_axis` lies far from it.
+    fn report_up(&self, standing: Option<nalgebra::Vector3<f64>>) -> Vec<String> {
+        use crate::geometry::up;
+        let Some(e) = up::estimate(&self.sequence.cameras, standing) else {
+            return Vec::new();
+        };
+        let mut out = Vec::new();
+        match self.config.export.up_axis {
+            None => {
+                println!("{}", e.describe());
+                if e.spread_deg() > up::DISAGREEMENT_DEG {
+                    out.push(format!(
+                        "the cues for the world's up disagree by {:.0} degrees (a rig on one \
+                         side of the subject, tilted cameras): if the skeleton or the exports \
+                         stand askew, set export.up_axis",
+                        e.spread_deg()
+                    ));
+                }
+            }
+            Some(axis) => {
+                let given = crate::geometry::axes::up_vector(axis);
+                let off = up::angle_deg(&given, &e.up);
+                println!(
+                    "up: export.up_axis {} is {off:.1} degrees from the up the capture shows",
+                    String::from(axis)
+                );
+                if off > 30.0 && e.spread_deg() <= up::DISAGREEMENT_DEG {
+                    out.push(format!(
+                        "export.up_axis is {} but the capture's up is {} ({off:.0} degrees away): \
+                         is the axis right?",
+                        String::from(axis),
+                        up::nearest_axis(&e.up)
+                    ));
+                }
+            }
+        }
+        out
     }
 
     /// How much of frame `frame`'s hull surface (carved from `masks` at 2 cm or the

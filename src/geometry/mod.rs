@@ -14,5 +14,6 @@ pub mod oriented_nearest;
 pub mod ply;
 pub mod raster;
 pub mod smooth;
+pub mod up;
 
 pub use mesh::TriMesh;

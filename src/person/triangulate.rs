@@ -132,6 +132,20 @@ pub fn body_box(points: &[Option<Point3>]) -> Option<(Vector3<f64>, Vector3<f64>
     ))
 }
 
+/// The body's standing axis in a frame, from its feet towards its head: the mean of the
+/// ankles to the mean of the shoulders, when all four are triangulated.
+pub fn standing_axis(points: &[Option<Point3>]) -> Option<Vector3<f64>> {
+    let at = |name: &str| {
+        let i = crate::person::LANDMARK_NAMES
+            .iter()
+            .position(|n| *n == name)?;
+        points[i].as_ref().map(|p| p.position)
+    };
+    let shoulders = (at("left_shoulder")? + at("right_shoulder")?) / 2.0;
+    let ankles = (at("left_ankle")? + at("right_ankle")?) / 2.0;
+    (shoulders - ankles).try_normalize(1e-9)
+}
+
 /// The header of `keypoints3d.csv`.
 pub const CSV_HEADER: &str = "frame,landmark,x,y,z,views,rms_reprojection_px";
 

@@ -33,8 +33,7 @@ fn dancer_copy(to: &Path) -> bool {
     std::fs::write(
         to.join("pipeline.yaml"),
         "calibration: calib/cameras.yaml\nsequence: data/dancer\nframes: 0..99\n\
-         cache: cache\noutput: output\nsilhouette:\n  clean_given: true\n\
-         export:\n  up_axis: +z\n",
+         cache: cache\noutput: output\nsilhouette:\n  clean_given: true\n",
     )
     .unwrap();
     true
@@ -47,9 +46,20 @@ fn the_dancer_gets_a_skeleton_the_silhouettes_and_her_symmetry_agree_with() {
     if !dancer_copy(d) {
         return;
     }
+    // No up is given: the tool finds it from the cameras (her world's +z within a degree).
     let (ok, out, err) = run_cli(&["skeleton", "pipeline.yaml"], d);
     assert!(ok, "{err}");
     eprintln!("{out}{err}");
+    let up = out
+        .lines()
+        .find(|l| l.starts_with("up (found, no up given): ("))
+        .unwrap_or_else(|| panic!("no up line: {out}"));
+    let start = "up (found, no up given): (".len();
+    let v: Vec<f64> = up[start..start + up[start..].find(')').unwrap()]
+        .split(", ")
+        .map(|x| x.parse().unwrap())
+        .collect();
+    assert!(v[2] > 1f64.to_radians().cos(), "{up}");
     let skeleton = Skeleton::read(&d.join("data/dancer/skeleton.yaml")).unwrap();
     assert_eq!(skeleton.bones.len(), 17);
     let frame = skeleton.reference_frame;
