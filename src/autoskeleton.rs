@@ -158,7 +158,23 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
             outcome: Err(format!("the frame's hull is empty: {why}")),
         });
     }
-    let outcome = match crate::skeleton::embed::embed_scored(template, &body, up) {
+    // Where the person model saw the subject, its keypoints place the template first (no
+    // A- or T-pose needed); the surface refines that guess. Then the template's own
+    // placement, as on captures without images.
+    let guess = crate::artifacts::person::read(&job.cache, frame)?.and_then(|person| {
+        let points = crate::person::triangulate::triangulate_frame(&job.sequence.cameras, &person);
+        crate::person::skeleton::from_keypoints(template, &points)
+    });
+    let from_keypoints = guess
+        .as_ref()
+        .map(|g| crate::skeleton::embed::embed_from(template, &body, up, Some(g)));
+    let embedded = match from_keypoints {
+        Some(Ok(e)) => Ok(e),
+        Some(Err(k)) => crate::skeleton::embed::embed_scored(template, &body, up)
+            .map_err(|m| format!("{m} (from the person model's keypoints: {k})").into()),
+        None => crate::skeleton::embed::embed_scored(template, &body, up),
+    };
+    let outcome = match embedded {
         Ok(e) => {
             let masks = crate::stages::load_silhouettes(&job.context(), frame)?;
             let views = joint_views(&job.sequence.cameras, &masks, &e.skeleton);

@@ -5,6 +5,7 @@
 pub mod blazepose;
 pub mod evidence;
 pub mod model;
+pub mod skeleton;
 pub mod triangulate;
 
 pub use blazepose::{Landmark, LANDMARKS, LANDMARK_NAMES};

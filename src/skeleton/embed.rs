@@ -274,6 +274,18 @@ pub fn embed_scored(
     surface: &TriMesh,
     up: Vector3<f64>,
 ) -> Result<Embedding, Refusal> {
+    embed_from(template, surface, up, None)
+}
+
+/// [`embed_scored`] from a first guess `start` (the template's bones, placed in the world
+/// by other evidence, as the person model's keypoints) instead of the template's own
+/// placement: the guess is refined in the surface (step 4 on) and checked as any embedding.
+pub fn embed_from(
+    template: &Skeleton,
+    surface: &TriMesh,
+    up: Vector3<f64>,
+    start: Option<&Skeleton>,
+) -> Result<Embedding, Refusal> {
     if template.bones.is_empty() {
         return Err("the template has no bones".into());
     }
@@ -298,7 +310,22 @@ pub fn embed_scored(
     let total: f64 = lengths.iter().sum::<f64>().max(1e-9);
     let weights: Vec<f64> = lengths.iter().map(|l| l / total).collect();
 
-    let (placed, scale) = place(&interior, template, &tpl, &weights)?;
+    let (placed, scale) = match start {
+        // A first guess (the person model's keypoints): its joints, at its own scale.
+        Some(start) => {
+            if start.bones.len() != template.bones.len() {
+                return Err("the first guess does not have the template's bones".into());
+            }
+            let mut joints = tpl.clone();
+            for (b, bone) in start.bones.iter().enumerate() {
+                joints.points[tpl.ends[b].0] = to_z * bone.head;
+                joints.points[tpl.ends[b].1] = to_z * bone.tail;
+            }
+            let guessed: f64 = start.bones.iter().map(|b| b.length()).sum();
+            (joints, guessed / total)
+        }
+        None => place(&interior, template, &tpl, &weights)?,
+    };
     let finish = |joints: Joints| -> Result<(Joints, f64), Refusal> {
         let refined = descend_joints(&interior, template, &tpl, joints, scale, &weights);
         check(&interior, template, &refined)?;
