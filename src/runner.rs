@@ -282,12 +282,7 @@ impl Job {
                 crate::person::triangulate::summary(std::slice::from_ref(&points))
             );
             if p.bbox.is_none() {
-                p.bbox = crate::person::triangulate::body_box(&points).map(|(lo, hi)| {
-                    crate::recon::visual_hull::BoundingBox {
-                        min: lo.into(),
-                        max: hi.into(),
-                    }
-                });
+                p.bbox = crate::person::triangulate::body_box(&points);
             }
         }
         let p = &p;

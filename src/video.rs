@@ -323,34 +323,33 @@ pub fn probe_all(videos: &[(usize, PathBuf)], cameras: &[Camera]) -> Result<Vec<
         .par_iter()
         .map(|(_, path)| probe(path))
         .collect::<Result<_>>()?;
-    let wrong: Vec<String> = videos
+    let wrong: Vec<(&(usize, PathBuf), &Probe)> = videos
         .iter()
         .zip(&probes)
         .filter(|((i, _), p)| (p.width, p.height) != (cameras[*i].width, cameras[*i].height))
-        .map(|((i, path), p)| {
-            format!(
-                "{} is {}x{} but camera {} is calibrated for {}x{}",
-                crate::text::shown_path(path),
-                p.width,
-                p.height,
-                crate::text::quoted(&cameras[*i].name),
-                cameras[*i].width,
-                cameras[*i].height
-            )
-        })
         .collect();
-    if let Some(((i, path), p)) = videos
-        .iter()
-        .zip(&probes)
-        .find(|((i, _), p)| (p.width, p.height) != (cameras[*i].width, cameras[*i].height))
-    {
+    if let Some(&((i, path), p)) = wrong.first() {
+        let named: Vec<String> = wrong
+            .iter()
+            .map(|((i, path), p)| {
+                format!(
+                    "{} is {}x{} but camera {} is calibrated for {}x{}",
+                    crate::text::shown_path(path),
+                    p.width,
+                    p.height,
+                    crate::text::quoted(&cameras[*i].name),
+                    cameras[*i].width,
+                    cameras[*i].height
+                )
+            })
+            .collect();
         return Err(Error::invalid(
             path,
             format!(
                 "{} video(s) are not the size their camera is calibrated for: {}; these are \
                  other cameras' videos, or the calibration's width/height is wrong{}",
                 wrong.len(),
-                wrong.join("; "),
+                named.join("; "),
                 crate::camera::crop_hint(&cameras[*i], (p.width, p.height))
             ),
         ));

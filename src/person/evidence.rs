@@ -91,24 +91,18 @@ pub fn frame_evidence(
         )));
     }
     // The keypoints bound the person (few cameras' cones bound little of the room).
-    let frame = PersonFrame { views };
-    let points = super::triangulate::triangulate_frame(cams, &frame);
-    let mut views = frame.views;
+    let mut frame = PersonFrame { views };
     let mut hull = hull.clone();
     if hull.bbox.is_none() {
-        hull.bbox = super::triangulate::body_box(&points).map(|(lo, hi)| {
-            crate::recon::visual_hull::BoundingBox {
-                min: lo.into(),
-                max: hi.into(),
-            }
-        });
+        hull.bbox =
+            super::triangulate::body_box(&super::triangulate::triangulate_frame(cams, &frame));
     }
-    let found: Vec<bool> = views.iter().map(|v| v.found).collect();
+    let found: Vec<bool> = frame.views.iter().map(|v| v.found).collect();
     let dropped = drop_unsupported(cams, &mut masks, &found, &hull);
-    for (view, share) in views.iter_mut().zip(dropped) {
+    for (view, share) in frame.views.iter_mut().zip(dropped) {
         view.unsupported = share;
     }
-    Ok((masks, PersonFrame { views }))
+    Ok((masks, frame))
 }
 
 /// Removes from the masks of the cameras marked in `cleaned` every pixel no other camera's

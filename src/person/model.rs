@@ -57,9 +57,16 @@ fn not_set_up(dir: &Path, what: &str) -> Error {
 }
 
 /// A key for the model's files (their content), for the caches that hold its results.
+/// The 25 MB are hashed once per process and folder: the silhouette stage asks for it with
+/// every frame's settings.
 pub fn fingerprint(dir: &Path) -> Result<String> {
+    static KNOWN: std::sync::Mutex<Vec<(PathBuf, String)>> = std::sync::Mutex::new(Vec::new());
     if !is_set_up(dir) {
         return Err(not_set_up(dir, "the person model is not set up here"));
+    }
+    let mut known = KNOWN.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, key)) = known.iter().find(|(d, _)| d == dir) {
+        return Ok(key.clone());
     }
     let mut h = blake3::Hasher::new();
     for f in [DETECTOR_FILE, LANDMARKS_FILE] {
@@ -67,7 +74,9 @@ pub fn fingerprint(dir: &Path) -> Result<String> {
         let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
         h.update(&bytes);
     }
-    Ok(h.finalize().to_hex()[..16].to_string())
+    let key = h.finalize().to_hex()[..16].to_string();
+    known.push((dir.to_path_buf(), key.clone()));
+    Ok(key)
 }
 
 /// The person found in one image.

@@ -6,6 +6,7 @@
 
 use super::PersonFrame;
 use crate::camera::Camera;
+use crate::recon::visual_hull::BoundingBox;
 use nalgebra::{Matrix4, Vector2, Vector3};
 
 /// Below this visibility a landmark's 2D position is a guess (hidden or out of view) and is
@@ -114,8 +115,9 @@ fn dlt(cams: &[Camera], obs: &[(usize, Vector2<f64>, f64)]) -> Option<Vector3<f6
 pub const BODY_REACH: f64 = 0.3;
 
 /// The box a person fills, from a frame's triangulated keypoints: their bounding box grown
-/// by [`BODY_REACH`]; `None` with fewer than 4 keypoints (too few to bound a body).
-pub fn body_box(points: &[Option<Point3>]) -> Option<(Vector3<f64>, Vector3<f64>)> {
+/// by [`BODY_REACH`], as the visual hull's carving box; `None` with fewer than 4 keypoints
+/// (too few to bound a body).
+pub fn body_box(points: &[Option<Point3>]) -> Option<BoundingBox> {
     let found: Vec<&Vector3<f64>> = points.iter().flatten().map(|p| &p.position).collect();
     if found.len() < 4 {
         return None;
@@ -126,10 +128,10 @@ pub fn body_box(points: &[Option<Point3>]) -> Option<(Vector3<f64>, Vector3<f64>
     let hi = found
         .iter()
         .fold(Vector3::repeat(f64::NEG_INFINITY), |a, p| a.sup(p));
-    Some((
-        lo - Vector3::repeat(BODY_REACH),
-        hi + Vector3::repeat(BODY_REACH),
-    ))
+    Some(BoundingBox {
+        min: (lo - Vector3::repeat(BODY_REACH)).into(),
+        max: (hi + Vector3::repeat(BODY_REACH)).into(),
+    })
 }
 
 /// The body's standing axis in a frame, from its feet towards its head: the mean of the

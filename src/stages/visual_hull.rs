@@ -34,12 +34,7 @@ fn compute(p: &VisualHullParams, inputs: &Inputs, frame: u32) -> Result<Produced
         (None, Some(person)) => {
             let points = crate::person::triangulate::triangulate_frame(cameras, &person);
             with_box = p.clone();
-            with_box.bbox = crate::person::triangulate::body_box(&points).map(|(lo, hi)| {
-                visual_hull::BoundingBox {
-                    min: lo.into(),
-                    max: hi.into(),
-                }
-            });
+            with_box.bbox = crate::person::triangulate::body_box(&points);
             &with_box
         }
         _ => p,
