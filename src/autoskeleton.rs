@@ -25,9 +25,25 @@ impl Template {
         }
     }
 
-    fn load(&self) -> Result<Skeleton> {
+    /// The template in a world whose up is `up`: the built-in humanoid (standing on +z)
+    /// turned so that it stands on `up`; a file's skeleton as it is (its world's up taken
+    /// to be the capture's).
+    fn load(&self, up: &Vector3<f64>) -> Result<Skeleton> {
         match self {
-            Template::Humanoid => Ok(crate::synth::humanoid::skeleton()),
+            Template::Humanoid => {
+                let mut skeleton = crate::synth::humanoid::skeleton();
+                let turn =
+                    nalgebra::Rotation3::rotation_between(&Vector3::z(), up).unwrap_or_else(|| {
+                        nalgebra::Rotation3::from_axis_angle(
+                            &Vector3::x_axis(),
+                            std::f64::consts::PI,
+                        )
+                    });
+                for b in &mut skeleton.bones {
+                    (b.head, b.tail) = (turn * b.head, turn * b.tail);
+                }
+                Ok(skeleton)
+            }
             Template::File(path) => Skeleton::read(path),
         }
     }
@@ -272,7 +288,7 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
             (e.up, Some(e.describe()))
         }
     };
-    let template = template.load()?;
+    let template = template.load(&up)?;
     let candidates = match frame {
         Some(f) if !job.frames.contains(&f) => {
             return Err(Error::Usage(

@@ -62,6 +62,16 @@ enum Command {
         /// the thighs into one volume and swings with the legs.
         #[arg(long)]
         dress: bool,
+        /// The humanoid holds one pose in every frame instead of a motion (one frame unless
+        /// --frames says more): `a-pose`, `t-pose`, `arms-down`, `arms-out-bent` (upper arms
+        /// out, elbows bent, fists down), `arms-overhead`, `one-arm-forward`, `hands-on-hips`.
+        #[arg(long, value_enum)]
+        pose: Option<hullpose::synth::humanoid::HeldPose>,
+        /// Tilt the written world by this many degrees (and move its origin): the
+        /// calibration and the truth are turned together, the images are the same, and
+        /// nothing but ground_truth/world.yaml says where up is.
+        #[arg(long, value_name = "DEG", default_value_t = 0.0)]
+        world_tilt: f64,
     },
     /// Run the pipeline: compute what is stale, reuse what the cache holds.
     Run {
@@ -674,10 +684,14 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             motion,
             body,
             dress,
+            pose,
+            world_tilt,
         } => {
             let mut opts = SynthOptions::new(scene, out);
             opts.motion = motion;
             opts.dress = dress;
+            opts.pose = pose;
+            opts.world_tilt_deg = world_tilt;
             if body != 0 {
                 opts.proportions = hullpose::synth::humanoid::Proportions::from_seed(body);
             }

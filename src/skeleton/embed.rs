@@ -326,22 +326,54 @@ pub fn embed_from(
         }
         None => place(&interior, template, &tpl, &weights)?,
     };
-    let finish = |joints: Joints| -> Result<(Joints, f64), Refusal> {
+    let tips = limb_extremities(&interior, template, &placed);
+    let finish = |joints: Joints| -> Result<(Joints, f64, Unheld), Refusal> {
         let refined = descend_joints(&interior, template, &tpl, joints, scale, &weights);
         check(&interior, template, &refined)?;
         let uncovered = check_coverage(&interior, template, &refined, &local)?;
-        Ok((refined, uncovered))
+        let empty = unheld(template, &refined, &tips);
+        Ok((refined, uncovered, empty))
     };
-    // The template's own pose first; when that is refused (a real body's limbs raised,
-    // forward or bent), its limbs followed through the interior to its extremities.
-    let (refined, uncovered_share) = match finish(placed.clone()) {
-        Ok(done) => done,
-        Err(first) => {
-            let followed = follow_limbs(&interior, template, placed);
-            finish(followed)
-                .map_err(|second| format!("{second} (with the template's pose: {first})"))?
+    // Two tries: the placement's own pose, and its limbs followed through the interior to
+    // the surface's extremities (a real body's limbs raised, forward or bent). The one
+    // that leaves fewer limb-shaped extremities without a bone wins, then the one that
+    // leaves less of the surface unexplained.
+    let first = finish(placed.clone());
+    let second = finish(follow_limbs(template, placed, &tips));
+    let (refined, uncovered_share, empty) = match (first, second) {
+        (Ok(a), Ok(b)) => {
+            if (b.2.rank(), b.1) < (a.2.rank(), a.1) {
+                b
+            } else {
+                a
+            }
         }
+        (Ok(a), Err(_)) => a,
+        (Err(_), Ok(b)) => b,
+        (Err(a), Err(b)) => return Err(format!("{b} (with the template's pose: {a})").into()),
     };
+    if let (true, Some(&e)) = (empty.misplaced(), empty.parts.first()) {
+        let tip = tips[e].path.last().copied().unwrap_or_default();
+        let tip = to_z.inverse() * tip;
+        return Err(format!(
+            "a limb-shaped part of the surface ({:.0} cm long, its end at ({:.2}, {:.2}, \
+             {:.2})) holds no bone while '{}' lies in no limb{}: the template's limbs could \
+             not be laid in this body's limbs (a hand touching the body, as hands on the \
+             hips, closes a loop the template cannot follow); choose a frame where the arms \
+             and legs stand clear of the torso with --frame, or check the world's up",
+            100.0 * tips[e].length,
+            tip.x,
+            tip.y,
+            tip.z,
+            template.bones[empty.limbs[0]].name,
+            if empty.parts.len() > 1 {
+                format!(" ({} such parts)", empty.parts.len())
+            } else {
+                String::new()
+            }
+        )
+        .into());
+    }
     let from_z = to_z.inverse();
     let skeleton = Skeleton {
         reference_frame: template.reference_frame,
@@ -597,17 +629,20 @@ fn end_chains(template: &Skeleton) -> Vec<Vec<usize>> {
         .collect()
 }
 
-/// Step 3c ([`super::follow`]): each end chain laid along the interior's path to the
-/// extremity matched to it; chains with no extremity keep their pose.
-fn follow_limbs(interior: &Interior, template: &Skeleton, mut joints: Joints) -> Joints {
-    use super::follow;
+/// The interior's extremities ([`super::follow::extremities`]) from the torso of the
+/// placed `joints` (the bones in no end chain).
+fn limb_extremities(
+    interior: &Interior,
+    template: &Skeleton,
+    joints: &Joints,
+) -> Vec<super::follow::Extremity> {
     let chains = end_chains(template);
     let in_chain: Vec<usize> = chains.iter().flatten().copied().collect();
     let torso: Vec<usize> = (0..template.bones.len())
         .filter(|b| !in_chain.contains(b))
         .collect();
     if torso.is_empty() || chains.is_empty() {
-        return joints;
+        return Vec::new();
     }
     let near = torso
         .iter()
@@ -617,12 +652,142 @@ fn follow_limbs(interior: &Interior, template: &Skeleton, mut joints: Joints) ->
         })
         .sum::<Vector3<f64>>()
         / torso.len() as f64;
-    let field = follow::Field {
+    let field = super::follow::Field {
         grid: &interior.grid,
         depth: &interior.depth,
     };
-    let tips = follow::extremities(&field, &near, 0.2);
-    if tips.is_empty() {
+    super::follow::extremities(&field, &near, 0.2)
+}
+
+/// An extremity is held when an end chain's last bone (a hand, a foot, the head) passes
+/// within this of its tip, metres.
+const TIP_HELD: f64 = 0.12;
+
+/// How the limbs of `joints` sit in the surface's extremities `tips`: the limb-shaped
+/// extremities ([`super::follow::Extremity::limb_shaped`]) that no end chain's last bone
+/// holds, and the arms and legs (end chains of a left/right pair) whose last bone holds
+/// none; each last bone holds at most one extremity, the nearest pairs first.
+fn unheld(template: &Skeleton, joints: &Joints, tips: &[super::follow::Extremity]) -> Unheld {
+    let leaves: Vec<usize> = end_chains(template)
+        .iter()
+        .filter_map(|c| c.last().copied())
+        .collect();
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (e, tip) in tips.iter().enumerate() {
+        let Some(end) = tip.path.last().filter(|_| tip.limb_shaped()) else {
+            continue;
+        };
+        for (l, &b) in leaves.iter().enumerate() {
+            let (h, t) = joints.bone(b);
+            let d = t - h;
+            let s = ((end - h).dot(&d) / d.norm_squared().max(1e-18)).clamp(0.0, 1.0);
+            let gap = (end - (h + d * s)).norm();
+            if gap <= TIP_HELD {
+                pairs.push((gap, e, l));
+            }
+        }
+    }
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (mut tip_held, mut leaf_used) = (vec![false; tips.len()], vec![false; leaves.len()]);
+    for (_, e, l) in pairs {
+        if !tip_held[e] && !leaf_used[l] {
+            (tip_held[e], leaf_used[l]) = (true, true);
+        }
+    }
+    let parts: Vec<usize> = (0..tips.len())
+        .filter(|&e| !tip_held[e] && tips[e].limb_shaped())
+        .collect();
+    let chains = end_chains(template);
+    let limbs: Vec<usize> = (0..leaves.len())
+        .filter(|&l| !leaf_used[l])
+        .map(|l| leaves[l])
+        .filter(|&b| super::sides::other_side(&template.bones[b].name).is_some())
+        .collect();
+    // An arm in no part is misplaced when an empty part could be its own: the part's path
+    // passes the arm's root and offers about its length beyond it. (Legs are not judged
+    // so: a dress hides the legs' extremities, and a real hull's phantom sheets along the
+    // floor look like legs.)
+    let shoulders = {
+        let zs = joints.points.iter().map(|p| p.z);
+        let (lo, hi) = zs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), z| {
+            (a.min(z), b.max(z))
+        });
+        // The shoulders lie above this, the hips below.
+        lo + 0.65 * (hi - lo)
+    };
+    let misplaced = limbs.iter().any(|&leaf| {
+        let Some(chain) = chains.iter().find(|c| c.last() == Some(&leaf)) else {
+            return false;
+        };
+        let root = joints.bone(chain[0]).0;
+        if root.z < shoulders {
+            return false;
+        }
+        let length: f64 = chain
+            .iter()
+            .map(|&b| {
+                let (h, t) = joints.bone(b);
+                (t - h).norm()
+            })
+            .sum();
+        parts
+            .iter()
+            .any(|&e| limb_path_cost(&tips[e].path, &root, length) < 1.0)
+    });
+    Unheld {
+        parts,
+        limbs,
+        misplaced,
+    }
+}
+
+/// How badly a limb of `length` metres from joint `root` fits along an extremity's `path`:
+/// 0 when the path passes through the root and offers exactly the length beyond it; 1 or
+/// more is no fit.
+fn limb_path_cost(path: &[Vector3<f64>], root: &Vector3<f64>, length: f64) -> f64 {
+    use super::follow;
+    let start = follow::nearest_on(path, root);
+    let available = follow::remaining(path, start);
+    (available - length).abs() / length + 2.0 * (path[start] - root).norm() / length
+}
+
+/// What [`unheld`] finds.
+#[derive(Debug, Clone, Default)]
+struct Unheld {
+    /// Limb-shaped extremities (indices into the tips) that hold no bone.
+    parts: Vec<usize>,
+    /// Arms' and legs' last bones that hold no extremity.
+    limbs: Vec<usize>,
+    /// Whether one of `parts` could be the limb of one of `limbs` ([`limb_path_cost`]).
+    misplaced: bool,
+}
+
+impl Unheld {
+    /// A limb laid where the surface has no limb while a limb-shaped part that could be
+    /// its own stays empty: the embedding is wrong. (An empty part with every limb in one,
+    /// or that no idle limb could fill, is a phantom volume or a fold of clothing; a limb in
+    /// no extremity with every part held is a limb against the body, as arms hanging at the
+    /// sides.)
+    fn misplaced(&self) -> bool {
+        self.misplaced
+    }
+
+    /// Orders embeddings, the fewest problems first.
+    fn rank(&self) -> (bool, usize) {
+        (self.misplaced(), self.parts.len() + self.limbs.len())
+    }
+}
+
+/// Step 3c ([`super::follow`]): each end chain laid along the interior's path to the
+/// extremity matched to it; chains with no extremity keep their pose.
+fn follow_limbs(
+    template: &Skeleton,
+    mut joints: Joints,
+    tips: &[super::follow::Extremity],
+) -> Joints {
+    use super::follow;
+    let chains = end_chains(template);
+    if tips.is_empty() || chains.is_empty() {
         return joints;
     }
     // What each chain is: its root joint and its placed length.
@@ -640,14 +805,12 @@ fn follow_limbs(interior: &Interior, template: &Skeleton, mut joints: Joints) ->
             (root, length)
         })
         .collect();
+    // The path must pass the chain's root (a hand's path runs through its shoulder) and
+    // offer about the chain's length beyond it; where the template's end lies says nothing
+    // (a real body's limbs are anywhere).
     let cost = |c: usize, e: &follow::Extremity| -> f64 {
         let (root, length) = facts[c];
-        let start = follow::nearest_on(&e.path, &root);
-        let available = follow::remaining(&e.path, start);
-        // The path must pass the chain's root (a hand's path runs through its shoulder)
-        // and offer about the chain's length beyond it; where the template's end lies says
-        // nothing (a real body's limbs are anywhere).
-        (available - length).abs() / length + 2.0 * (e.path[start] - root).norm() / length
+        limb_path_cost(&e.path, &root, length)
     };
     // Brute force over the assignments (a chain may stay unmatched at cost 1).
     const UNMATCHED: f64 = 1.0;

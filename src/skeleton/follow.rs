@@ -5,8 +5,9 @@
 //! are laid along the path at the template's bone lengths. Pinocchio (Baran and Popović
 //! 2007) embeds along the medial axis in the same spirit.
 //!
-//! 1. Geodesic distances over the inside voxels (26-neighbour Dijkstra) from the deepest
-//!    voxel near the placed torso.
+//! 1. Paths over the inside voxels (26-neighbour Dijkstra) from the deepest voxel near the
+//!    placed torso, each step costing its length over the depth there: the paths run along
+//!    the middle of the parts.
 //! 2. Extremities: the farthest voxel not yet claimed, then the tube around its path (the
 //!    local depth plus [`TUBE_MARGIN`]) and the geodesic ball around it are claimed, and
 //!    again, while the farthest unclaimed voxel lies at least [`MIN_REACH`] from the torso.
@@ -45,6 +46,28 @@ const MOST_EXTREMITIES: usize = 20;
 pub struct Extremity {
     /// Voxel centres from the seed to the extremity.
     pub path: Vec<Vector3<f64>>,
+    /// How far the extremity stands out of the torso and of the extremities found before
+    /// it: the path's length from its tip back to where the interior grows deeper than
+    /// [`LIMB_DEPTH_SHARE`] of the seed's depth or the path enters an earlier one's claim,
+    /// metres.
+    pub length: f64,
+    /// The mean depth along that protruding part, metres (about a limb's radius).
+    pub depth: f64,
+}
+
+/// A limb is thinner than this share of the torso's depth (the deepest point near the
+/// torso's centre): the synthetic humanoid's thigh 0.55, upper arm 0.35.
+pub const LIMB_DEPTH_SHARE: f64 = 0.6;
+
+/// An extremity standing out of the torso by at least this is limb-shaped, metres (a hand
+/// and forearm; a shoulder or a phantom wedge stands out less, or is thicker).
+pub const LIMB_LENGTH: f64 = 0.2;
+
+impl Extremity {
+    /// Whether it is long and thin: an arm, a leg, the neck and head.
+    pub fn limb_shaped(&self) -> bool {
+        self.length >= LIMB_LENGTH
+    }
 }
 
 /// The inside voxels among the 26 around voxel `i`, with the step to each, metres.
@@ -85,8 +108,12 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
     let Some(seed) = seed else {
         return Vec::new();
     };
-    // Dijkstra over the inside voxels, distances in metres.
+    // Dijkstra over the inside voxels. A step costs its length over the depth there (in
+    // voxels, at least one), so that paths run along the middle of each part (the medial
+    // axis) rather than hugging its inner wall; `dist` is a path's cost, `length` its
+    // length in metres.
     let mut dist = vec![f64::INFINITY; g.len()];
+    let mut length = vec![0.0f64; g.len()];
     let mut from = vec![usize::MAX; g.len()];
     let mut heap = BinaryHeap::new();
     dist[seed] = 0.0;
@@ -98,9 +125,10 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
             continue;
         }
         for (j, step) in inside_neighbours(field, i) {
-            let nd = d + step;
+            let nd = d + step * g.voxel / (field.depth[j] as f64).max(g.voxel);
             if nd < dist[j] {
                 dist[j] = nd;
+                length[j] = length[i] + step;
                 from[j] = i;
                 heap.push((Reverse((nd * 1e9) as u64), j));
             }
@@ -117,9 +145,11 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
             .filter(|&i| dist[i].is_finite() && !claimed[i])
             .max_by(|&a, &b| dist[a].total_cmp(&dist[b]));
         let Some(far) = far else { break };
-        if dist[far] < MIN_REACH {
+        if length[far] < MIN_REACH {
             break;
         }
+        // How far the tip stands out of the torso and of the extremities found before it,
+        // through voxels thinner than a limb.
         let mut path = vec![far];
         while let Some(&last) = path.last() {
             if from[last] == usize::MAX {
@@ -128,6 +158,16 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
             path.push(from[last]);
         }
         path.reverse();
+        let thin = LIMB_DEPTH_SHARE * deepest as f64;
+        let (mut stands_out, mut depth_sum, mut steps) = (0.0, 0.0, 0usize);
+        for w in path.windows(2).rev() {
+            if field.depth[w[0]] as f64 > thin || claimed[w[0]] {
+                break;
+            }
+            stands_out += (centre(w[1]) - centre(w[0])).norm();
+            depth_sum += field.depth[w[1]] as f64;
+            steps += 1;
+        }
         // Claim the tube around the path.
         for &p in &path {
             let r = field.depth[p].max(0.0) as f64 + TUBE_MARGIN;
@@ -145,7 +185,7 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
             }
         }
         // And the geodesic ball around the tip: the rest of this hand or foot.
-        let reach = (TIP_BALL_SHARE * dist[far]).max(MIN_TIP_BALL);
+        let reach = (TIP_BALL_SHARE * length[far]).max(MIN_TIP_BALL);
         let mut ball = vec![(far, 0.0f64)];
         let mut seen = std::collections::HashMap::new();
         seen.insert(far, 0.0f64);
@@ -161,6 +201,8 @@ pub fn extremities(field: &Field, near: &Vector3<f64>, radius: f64) -> Vec<Extre
         }
         out.push(Extremity {
             path: path.iter().map(|&i| centre(i)).collect(),
+            length: stands_out,
+            depth: depth_sum / steps.max(1) as f64,
         });
     }
     out

@@ -451,6 +451,93 @@ fn hand_on_knee(body: &Body) -> Pose {
     p.pose
 }
 
+/// Arms straight out to the sides, level with the shoulders.
+fn t_pose(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    for (s, side) in [(1.0, "l"), (-1.0, "r")] {
+        for part in ["upper_arm", "forearm", "hand"] {
+            p.point(&format!("{part}_{side}"), Vector3::new(s, 0.0, 0.0));
+        }
+    }
+    p.pose
+}
+
+/// Upper arms out to the sides just below the shoulders, elbows bent so the forearms hang
+/// down and a little forward, fists down (an ordinary pose of people told to stand still
+/// with their arms away from the body).
+fn arms_out_bent(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    for (s, side) in [(1.0, "l"), (-1.0, "r")] {
+        p.point(&format!("upper_arm_{side}"), Vector3::new(s, 0.0, -0.35));
+        p.point(
+            &format!("forearm_{side}"),
+            Vector3::new(s * 0.15, -0.2, -1.0),
+        );
+        p.point(&format!("hand_{side}"), Vector3::new(s * 0.1, -0.1, -1.0));
+    }
+    p.pose
+}
+
+/// Both arms raised over the head, a little apart.
+fn arms_overhead(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    for (s, side) in [(1.0, "l"), (-1.0, "r")] {
+        p.point(
+            &format!("upper_arm_{side}"),
+            Vector3::new(s * 0.35, 0.0, 1.0),
+        );
+        p.point(&format!("forearm_{side}"), Vector3::new(s * 0.2, 0.0, 1.0));
+        p.point(&format!("hand_{side}"), Vector3::new(s * 0.15, 0.0, 1.0));
+    }
+    p.pose
+}
+
+/// The right arm held straight forward at shoulder height (the body faces -y), the left
+/// hanging at the side.
+fn one_arm_forward(body: &Body) -> Pose {
+    let mut p = PoseBuilder::new(body);
+    for part in ["upper_arm", "forearm", "hand"] {
+        p.point(&format!("{part}_r"), Vector3::new(-0.1, -1.0, 0.0));
+        p.point(&format!("{part}_l"), Vector3::new(0.15, 0.0, -1.0));
+    }
+    p.pose
+}
+
+/// A pose held still over every frame (`pipeline synth --pose`), for testing the skeleton
+/// tools on the poses people stand in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum HeldPose {
+    /// The arms 45 degrees down from the shoulders (the rest pose).
+    APose,
+    /// The arms level out to the sides.
+    TPose,
+    /// The arms hanging at the sides against the hips.
+    ArmsDown,
+    /// Upper arms out to the sides, elbows bent, forearms and fists down.
+    ArmsOutBent,
+    /// Both arms raised over the head.
+    ArmsOverhead,
+    /// The right arm straight forward, the left down.
+    OneArmForward,
+    /// Both hands on the hips (hands touching the pelvis).
+    HandsOnHips,
+}
+
+impl HeldPose {
+    /// The pose on `body`.
+    pub fn build(self, body: &Body) -> Pose {
+        match self {
+            HeldPose::APose => a_pose(body),
+            HeldPose::TPose => t_pose(body),
+            HeldPose::ArmsDown => arms_down(body),
+            HeldPose::ArmsOutBent => arms_out_bent(body),
+            HeldPose::ArmsOverhead => arms_overhead(body),
+            HeldPose::OneArmForward => one_arm_forward(body),
+            HeldPose::HandsOnHips => hands_on_hips(body),
+        }
+    }
+}
+
 /// The left leg stepping across the right: the thigh forward and inward, the shin down past
 /// the right shin, the foot flat.
 fn leg_across(body: &Body) -> Pose {
@@ -569,8 +656,17 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
         ]
     };
     let on_knee = || vec![(bone("hand_r"), bone("thigh_l"))];
-    let (keys, key_frames, turn_deg): (Vec<Key>, usize, f64) = match motion {
-        super::Motion::Dance => (
+    let held = opts.pose.map(|h| h.build(&body));
+    let (keys, key_frames, turn_deg): (Vec<Key>, usize, f64) = match (&held, motion) {
+        (Some(pose), _) => {
+            let touching = if opts.pose == Some(HeldPose::HandsOnHips) {
+                on_hips()
+            } else {
+                vec![]
+            };
+            (vec![(0.0, pose, touching)], 1, 0.0)
+        }
+        (None, super::Motion::Dance) => (
             vec![
                 (0.0, &a, vec![]),
                 (13.0, &cross, crossed()),
@@ -581,7 +677,7 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
             DANCE_KEY_FRAMES,
             DANCE_TURN_DEG,
         ),
-        super::Motion::ArmsDown => (
+        (None, super::Motion::ArmsDown) => (
             vec![
                 (0.0, &down, vec![]),
                 (9.0, &down, vec![]),
@@ -595,8 +691,8 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
             0.0,
         ),
         // Replaced by the walk's own poses below.
-        super::Motion::Walk => (vec![(0.0, &a, vec![])], WALK_KEY_FRAMES, 0.0),
-        super::Motion::Default => (
+        (None, super::Motion::Walk) => (vec![(0.0, &a, vec![])], WALK_KEY_FRAMES, 0.0),
+        (None, super::Motion::Default) => (
             vec![
                 (0.0, &a, vec![]),
                 (4.0, &hips, on_hips()),
@@ -632,7 +728,7 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
             poses.push(blend(keys[k].1, keys[k + 1].1, u));
         }
         // The dance turns the whole body about the vertical through the pelvis.
-        let last = (key_frames - 1) as f64;
+        let last = (key_frames.max(2) - 1) as f64;
         let turn =
             Rotation3::from_axis_angle(&Vector3::z_axis(), (turn_deg * t / last).to_radians());
         let pose = poses.last_mut().expect("pushed");
@@ -640,7 +736,7 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
             *r = turn * *r;
         }
     }
-    if motion == super::Motion::Walk {
+    if motion == super::Motion::Walk && held.is_none() {
         poses = walk(&body, frames);
     }
     let cams = scene::camera_ring(
@@ -655,7 +751,7 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
         },
         seed,
     );
-    if motion == super::Motion::ArmsDown {
+    if motion == super::Motion::ArmsDown && held.is_none() {
         // The reference frame is the A-pose's (key frame 13; the nearest frame, snapped to
         // it, when the frames sampled miss it).
         let times = scene::sample_times(key_frames, frames);

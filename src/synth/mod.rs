@@ -11,6 +11,7 @@ pub mod render;
 pub mod scene;
 pub mod texture;
 pub mod tripod;
+pub mod world;
 
 use crate::error::{Error, Result};
 use crate::geometry::ply::{self, PlyFormat, VertexAttributes};
@@ -29,11 +30,20 @@ use std::time::Instant;
 /// their own rate, however many frames sample it (`frames` of the scene's key frames).
 fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
     let (key_frames, key_rate) = key_frames(opts);
-    let rate = key_rate * (frames.max(2) - 1) as f64 / (key_frames.max(2) - 1) as f64;
+    let rate = if key_frames > 1 {
+        key_rate * (frames.max(2) - 1) as f64 / (key_frames - 1) as f64
+    } else {
+        key_rate
+    };
+    // A tilted world says nothing of its up: the tool finds it.
+    let up = if opts.world_tilt_deg == 0.0 {
+        "  up_axis: +z        # the synthetic captures stand on +z; glb and bvh turn it to +Y\n"
+    } else {
+        ""
+    };
     format!(
         "# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
-         export:\n  up_axis: +z        # the synthetic captures stand on +z; glb and bvh turn it to +Y\n  \
-         frame_rate: {}        # the motion's key frames at {key_rate} per second\n",
+         export:\n{up}  frame_rate: {}        # the motion's key frames at {key_rate} per second\n",
         (rate * 100.0).round() / 100.0
     )
 }
@@ -141,6 +151,12 @@ pub struct SynthOptions {
     pub proportions: humanoid::Proportions,
     /// Whether the humanoid wears a dress (`--dress`: [`body::Skirt`]).
     pub dress: bool,
+    /// A pose the humanoid holds in every frame instead of a motion (`--pose`).
+    pub pose: Option<humanoid::HeldPose>,
+    /// Degrees by which the written world is tilted (`--world-tilt`): the calibration and
+    /// the truth are turned and moved together, nothing in the files says where up is
+    /// (0: the world stands on +z, as pipeline.yaml's export.up_axis says).
+    pub world_tilt_deg: f64,
 }
 
 impl SynthOptions {
@@ -159,6 +175,8 @@ impl SynthOptions {
             motion: Motion::Default,
             proportions: Default::default(),
             dress: false,
+            pose: None,
+            world_tilt_deg: 0.0,
         }
     }
 }
@@ -187,6 +205,19 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     if opts.dress && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--dress needs --scene humanoid".into()));
     }
+    if opts.pose.is_some() && opts.scene != SceneKind::Humanoid {
+        return Err(Error::Usage("--pose needs --scene humanoid".into()));
+    }
+    if opts.pose.is_some() && opts.motion != Motion::Default {
+        return Err(Error::Usage(
+            "--pose holds one pose in every frame: leave out --motion".into(),
+        ));
+    }
+    if !(opts.world_tilt_deg.is_finite() && (0.0..=90.0).contains(&opts.world_tilt_deg)) {
+        return Err(Error::Usage(
+            "--world-tilt must be between 0 and 90 degrees".into(),
+        ));
+    }
     if opts.motion != Motion::Default && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage(
             "--motion dance, arms-down and walk need --scene humanoid".into(),
@@ -210,6 +241,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
 fn key_frames(opts: &SynthOptions) -> (usize, f64) {
     match (opts.scene, opts.motion) {
         (SceneKind::Tripod, _) => (tripod::KEY_FRAMES, 25.0),
+        (SceneKind::Humanoid, _) if opts.pose.is_some() => (1, 8.0),
         (SceneKind::Humanoid, Motion::Dance) => (humanoid::DANCE_KEY_FRAMES, 25.0),
         (SceneKind::Humanoid, Motion::Default) => (humanoid::KEY_FRAMES, 8.0),
         (SceneKind::Humanoid, Motion::ArmsDown) => (humanoid::KEY_FRAMES, 8.0),
@@ -337,11 +369,20 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         )
     })?;
 
-    posed
+    // The calibration and the truth in the written world (the rendered one, untilted).
+    let tilt = world::WorldTilt::new(opts.world_tilt_deg);
+    let truth: Vec<(TriMesh, Vec<nalgebra::Vector3<f64>>)> = posed
+        .par_iter()
+        .map(|(mesh, normals, _)| {
+            let normals = normals.iter().map(|n| tilt.rotation * n).collect();
+            (tilt.mesh(mesh), normals)
+        })
+        .collect();
+    truth
         .par_iter()
         .enumerate()
         .skip(first)
-        .try_for_each(|(f, (mesh, normals, _))| {
+        .try_for_each(|(f, (mesh, normals))| {
             let path = seq_dir
                 .join("ground_truth")
                 .join("meshes")
@@ -353,9 +394,16 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
             ply::write_ply(&path, mesh, &attrs, PlyFormat::BinaryLittleEndian)
         })?;
 
+    let joints: Vec<Vec<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)>> = (scene.poses.iter())
+        .map(|p| {
+            (scene.body.joints(p).iter())
+                .map(|(h, t)| (tilt.point(h), tilt.point(t)))
+                .collect()
+        })
+        .collect();
     let mut rows = Vec::new();
-    for (f, pose) in scene.poses.iter().enumerate().skip(first) {
-        for (b, (head, tail)) in scene.body.joints(pose).into_iter().enumerate() {
+    for (f, frame_joints) in joints.iter().enumerate().skip(first) {
+        for (b, &(head, tail)) in frame_joints.iter().enumerate() {
             rows.push(JointRow {
                 frame: f as u32,
                 bone: scene.body.skeleton.bones[b].name.clone(),
@@ -365,29 +413,47 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         }
     }
     crate::joints::write(&seq_dir.join("ground_truth").join("joints.csv"), &rows)?;
-    let skeleton = &scene.body.skeleton;
+    // skeleton.yaml: the reference frame's joints; the poses relative to them.
+    let reference = scene.body.skeleton.reference_frame as usize;
+    let mut skeleton = scene.body.skeleton.clone();
+    for (bone, &(head, tail)) in skeleton.bones.iter_mut().zip(&joints[reference]) {
+        (bone.head, bone.tail) = (head, tail);
+    }
+    let root = (skeleton.bones.iter().position(|b| b.parent.is_none())).unwrap_or(0);
     let local: Vec<(u32, crate::skeleton::Pose)> = (scene.poses.iter().enumerate().skip(first))
-        .map(|(f, p)| (f as u32, p.to_local(skeleton)))
+        .map(|(f, p)| {
+            let from = &scene.poses[reference];
+            let relative = body::Pose {
+                rotations: (p.rotations.iter().zip(&from.rotations))
+                    .map(|(g, g0)| tilt.rotation * g * g0.inverse() * tilt.rotation.inverse())
+                    .collect(),
+                root_translation: joints[f][root].0 - joints[reference][root].0,
+            };
+            (f as u32, relative.to_local(&skeleton))
+        })
         .collect();
     crate::poses::write(
         &seq_dir.join("ground_truth").join("poses.csv"),
-        skeleton,
+        &skeleton,
         &local,
     )?;
-    scene.body.skeleton.write(&seq_dir.join("skeleton.yaml"))?;
-    crate::camera::write_cameras(&opts.out.join("calib").join("cameras.yaml"), &scene.cameras)?;
+    tilt.write_truth(&seq_dir.join("ground_truth").join("world.yaml"))?;
+    skeleton.write(&seq_dir.join("skeleton.yaml"))?;
+    let cameras: Vec<crate::camera::Camera> =
+        scene.cameras.iter().map(|c| tilt.camera(c)).collect();
+    crate::camera::write_cameras(&opts.out.join("calib").join("cameras.yaml"), &cameras)?;
     let pipeline_yaml = opts.out.join("pipeline.yaml");
-    let bounds = posed
+    let bounds = truth
         .iter()
         .skip(first)
-        .filter_map(|(mesh, _, _)| mesh.bounds())
+        .filter_map(|(mesh, _)| mesh.bounds())
         .reduce(|(a, b), (c, d)| (a.inf(&c), b.sup(&d)));
     crate::fsutil::write_atomic(
         &pipeline_yaml,
         format!(
             "{}{}{}",
             crate::config::default_yaml("calib/cameras.yaml", &format!("data/{}", scene.name)),
-            box_yaml(&scene.cameras, &seq_dir, first as u32, bounds)?,
+            box_yaml(&cameras, &seq_dir, first as u32, bounds)?,
             synth_export_yaml(nf, opts)
         )
         .as_bytes(),

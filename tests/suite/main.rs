@@ -38,6 +38,7 @@ mod quick_start;
 mod realdata;
 mod report;
 mod runner;
+mod skeleton_poses;
 mod skeleton_refusals;
 mod stage_functions;
 mod synth_data;
