@@ -352,7 +352,7 @@ pub fn embed_from(
         (Err(_), Ok(b)) => b,
         (Err(a), Err(b)) => return Err(format!("{b} (with the template's pose: {a})").into()),
     };
-    if let (true, Some(&e)) = (empty.misplaced(), empty.parts.first()) {
+    if let (true, Some(&e)) = (empty.misplaced, empty.parts.first()) {
         let tip = tips[e].path.last().copied().unwrap_or_default();
         let tip = to_z.inverse() * tip;
         return Err(format!(
@@ -758,23 +758,17 @@ struct Unheld {
     parts: Vec<usize>,
     /// Arms' and legs' last bones that hold no extremity.
     limbs: Vec<usize>,
-    /// Whether one of `parts` could be the limb of one of `limbs` ([`limb_path_cost`]).
+    /// Whether one of `parts` could be the arm of one of `limbs` ([`limb_path_cost`]): an
+    /// arm laid where the surface has no arm while its own part stays empty, a wrong
+    /// embedding. (A part no idle limb could fill is phantom volume or clothing; a limb in
+    /// no part with no such part empty lies against the body, as arms at the sides.)
     misplaced: bool,
 }
 
 impl Unheld {
-    /// A limb laid where the surface has no limb while a limb-shaped part that could be
-    /// its own stays empty: the embedding is wrong. (An empty part with every limb in one,
-    /// or that no idle limb could fill, is a phantom volume or a fold of clothing; a limb in
-    /// no extremity with every part held is a limb against the body, as arms hanging at the
-    /// sides.)
-    fn misplaced(&self) -> bool {
-        self.misplaced
-    }
-
     /// Orders embeddings, the fewest problems first.
     fn rank(&self) -> (bool, usize) {
-        (self.misplaced(), self.parts.len() + self.limbs.len())
+        (self.misplaced, self.parts.len() + self.limbs.len())
     }
 }
 
