@@ -1,5 +1,6 @@
 //! Mutation fuzzing of every parser of outside input: pipeline.yaml, cameras.yaml,
-//! skeleton.yaml, joints.csv, PLY, OBJ and the OpenCV and COLMAP calibration importers.
+//! skeleton.yaml, joints.csv, PLY, OBJ and the calibration importers (OpenCV, COLMAP,
+//! Pose2Sim/anipose TOML, Qualisys .qca.txt).
 //!
 //! Each target starts from the files under `tests/fuzz/<target>/` (valid seeds, plus any
 //! input that once broke a parser, kept as a regression), replays them, then mutates them
@@ -216,6 +217,20 @@ fn colmap_images(b: &[u8], dir: &Path) -> Result<(), String> {
     colmap(b, dir, false)
 }
 
+/// The Pose2Sim/anipose TOML importer (millimetre units, so the scale path runs too).
+fn pose2sim_toml(b: &[u8], dir: &Path) -> Result<(), String> {
+    let path = dir.join("Calib.toml");
+    std::fs::write(&path, b).unwrap();
+    outcome(hullpose::calib_import::pose2sim::from_toml(&path, 0.001))
+}
+
+/// The Qualisys .qca.txt importer (XML).
+fn qualisys_qca(b: &[u8], dir: &Path) -> Result<(), String> {
+    let path = dir.join("calib.qca.txt");
+    std::fs::write(&path, b).unwrap();
+    outcome(hullpose::calib_import::qualisys::from_qca(&path))
+}
+
 fn fuzz_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz")
 }
@@ -346,4 +361,14 @@ fn fuzz_colmap_cameras() {
 #[test]
 fn fuzz_colmap_images() {
     fuzz("colmap_images", colmap_images);
+}
+
+#[test]
+fn fuzz_pose2sim_toml() {
+    fuzz("pose2sim_toml", pose2sim_toml);
+}
+
+#[test]
+fn fuzz_qualisys_qca() {
+    fuzz("qualisys_qca", qualisys_qca);
 }
