@@ -175,21 +175,13 @@ fn try_frame(job: &Job, template: &Skeleton, up: Vector3<f64>, frame: u32) -> Re
         });
     }
     // Where the person model saw the subject, its keypoints place the template first (no
-    // A- or T-pose needed); the surface refines that guess. Then the template's own
-    // placement, as on captures without images.
+    // A- or T-pose needed) beside the template's own placement; the surface refines both and
+    // the one that explains it better is kept.
     let guess = crate::artifacts::person::read(&job.cache, frame)?.and_then(|person| {
         let points = crate::person::triangulate::triangulate_frame(&job.sequence.cameras, &person);
         crate::person::skeleton::from_keypoints(template, &points)
     });
-    let from_keypoints = guess
-        .as_ref()
-        .map(|g| crate::skeleton::embed::embed_from(template, &body, up, Some(g)));
-    let embedded = match from_keypoints {
-        Some(Ok(e)) => Ok(e),
-        Some(Err(k)) => crate::skeleton::embed::embed_scored(template, &body, up)
-            .map_err(|m| format!("{m} (from the person model's keypoints: {k})").into()),
-        None => crate::skeleton::embed::embed_scored(template, &body, up),
-    };
+    let embedded = crate::skeleton::embed::embed_from(template, &body, up, guess.as_ref());
     let outcome = match embedded {
         Ok(e) => {
             let masks = crate::stages::load_silhouettes(&job.context(), frame)?;

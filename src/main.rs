@@ -62,6 +62,11 @@ enum Command {
         /// the thighs into one volume and swings with the legs.
         #[arg(long)]
         dress: bool,
+        /// What the humanoid wears: `costume` (a saturated noise pattern everywhere but
+        /// plain trousers) or `person` (skin, hair, a red shirt, trousers, white shoes: a
+        /// look a person model recognizes).
+        #[arg(long, value_enum, default_value = "costume")]
+        look: hullpose::synth::Look,
         /// The humanoid holds one pose in every frame instead of a motion (one frame unless
         /// --frames says more): `a-pose`, `t-pose`, `arms-down`, `arms-out-bent` (upper arms
         /// out, elbows bent, fists down), `arms-overhead`, `one-arm-forward`, `hands-on-hips`.
@@ -684,12 +689,14 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             motion,
             body,
             dress,
+            look,
             pose,
             world_tilt,
         } => {
             let mut opts = SynthOptions::new(scene, out);
             opts.motion = motion;
             opts.dress = dress;
+            opts.look = look;
             opts.pose = pose;
             opts.world_tilt_deg = world_tilt;
             if body != 0 {

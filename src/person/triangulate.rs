@@ -29,23 +29,151 @@ pub struct Point3 {
 }
 
 /// Each of the 33 landmarks of one frame triangulated, `None` where fewer than two views
-/// see it (or agree on it).
+/// see it (or agree on it). A view that labels a pair of landmarks the wrong way round (a
+/// left knee as the right one, as a person model often does in a side view, where the two
+/// nearly overlap and the swap costs few pixels) has that pair swapped first
+/// ([`swapped_views`]).
 pub fn triangulate_frame(cams: &[Camera], frame: &PersonFrame) -> Vec<Option<Point3>> {
+    let mut views: Vec<Option<Vec<[f64; 3]>>> = frame
+        .views
+        .iter()
+        .map(|v| v.found.then(|| v.landmarks.clone()))
+        .collect();
+    for (left, right) in mirrored_pairs() {
+        for c in swapped_views(cams, &views, left, right) {
+            if let Some(marks) = &mut views[c] {
+                marks.swap(left, right);
+            }
+        }
+    }
     (0..crate::person::LANDMARKS)
-        .map(|l| {
-            let obs: Vec<(usize, Vector2<f64>, f64)> =
-                frame
-                    .views
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, v)| v.found)
-                    .filter_map(|(c, v)| {
-                        let [x, y, vis] = v.landmarks[l];
-                        (vis >= MIN_VISIBILITY && cams[c].in_image(&Vector2::new(x, y)))
-                            .then_some((c, Vector2::new(x, y), vis))
-                    })
-                    .collect();
-            robust(cams, obs)
+        .map(|l| robust(cams, observations(cams, &views, l)))
+        .collect()
+}
+
+/// One view's judgement of a proposed pair of points: whether it agrees (within
+/// [`MAX_REPROJECTION_PX`]), whether its labels are swapped, and its reprojection error (px).
+type Verdict = (bool, bool, f64);
+
+/// The views whose labels of the pair (`left`, `right`) are the wrong way round. Every two
+/// views that see both, with the second's labels as they are and swapped, propose the pair's
+/// two points; each view takes the labelling that reprojects nearer to them, and agrees when
+/// that is within [`MAX_REPROJECTION_PX`] for both. The proposal most views agree with (then
+/// the nearest) wins, and the labelling most of them give is taken as right.
+fn swapped_views(
+    cams: &[Camera],
+    views: &[Option<Vec<[f64; 3]>>],
+    left: usize,
+    right: usize,
+) -> Vec<usize> {
+    // (camera, left pixel, right pixel) where both are seen.
+    let seen: Vec<(usize, Vector2<f64>, Vector2<f64>)> = views
+        .iter()
+        .enumerate()
+        .filter_map(|(c, v)| {
+            let (a, b) = (v.as_ref()?[left], v.as_ref()?[right]);
+            let (pa, pb) = (Vector2::new(a[0], a[1]), Vector2::new(b[0], b[1]));
+            (a[2] >= MIN_VISIBILITY
+                && b[2] >= MIN_VISIBILITY
+                && cams[c].in_image(&pa)
+                && cams[c].in_image(&pb))
+            .then_some((c, pa, pb))
+        })
+        .collect();
+    // For proposed points (l, r): each view's verdict.
+    let judge = |l: &Vector3<f64>, r: &Vector3<f64>| -> Vec<Verdict> {
+        seen.iter()
+            .map(
+                |(c, pa, pb)| match (cams[*c].project(l), cams[*c].project(r)) {
+                    (Some(ql), Some(qr)) => {
+                        let straight = (pa - ql).norm().max((pb - qr).norm());
+                        let swapped = (pa - qr).norm().max((pb - ql).norm());
+                        let error = straight.min(swapped);
+                        (error <= MAX_REPROJECTION_PX, swapped < straight, error)
+                    }
+                    _ => (false, false, f64::INFINITY),
+                },
+            )
+            .collect()
+    };
+    // (views agreeing, their summed error, every view's verdict)
+    let mut best: Option<(usize, f64, Vec<Verdict>)> = None;
+    for i in 0..seen.len() {
+        for j in i + 1..seen.len() {
+            for swap in [false, true] {
+                let (ci, ai, bi) = seen[i];
+                let (cj, aj, bj) = seen[j];
+                let (aj, bj) = if swap { (bj, aj) } else { (aj, bj) };
+                let (Some(l), Some(r)) = (
+                    dlt(cams, &[(ci, ai, 1.0), (cj, aj, 1.0)]),
+                    dlt(cams, &[(ci, bi, 1.0), (cj, bj, 1.0)]),
+                ) else {
+                    continue;
+                };
+                let verdict = judge(&l, &r);
+                let agree = verdict.iter().filter(|v| v.0).count();
+                let error: f64 = verdict.iter().filter(|v| v.0).map(|v| v.2).sum();
+                if best
+                    .as_ref()
+                    .is_none_or(|b| agree > b.0 || (agree == b.0 && error < b.1))
+                {
+                    best = Some((agree, error, verdict));
+                }
+            }
+        }
+    }
+    let Some((_, _, verdict)) = best else {
+        return Vec::new();
+    };
+    // Most agreeing views keep their labels: the others are the swapped ones.
+    let agreeing: Vec<(usize, bool)> = seen
+        .iter()
+        .zip(&verdict)
+        .filter(|(_, v)| v.0)
+        .map(|(s, v)| (s.0, v.1))
+        .collect();
+    let flipped = agreeing.iter().filter(|a| a.1).count();
+    let majority_flipped = 2 * flipped > agreeing.len();
+    agreeing
+        .into_iter()
+        .filter(|a| a.1 != majority_flipped)
+        .map(|a| a.0)
+        .collect()
+}
+
+/// The (left, right) landmark index pairs, by name (`left_*` and `right_*`).
+fn mirrored_pairs() -> Vec<(usize, usize)> {
+    let names = crate::person::LANDMARK_NAMES;
+    names
+        .iter()
+        .enumerate()
+        .filter_map(|(l, n)| {
+            let rest = n.strip_prefix("left_")?;
+            let r = names
+                .iter()
+                .position(|m| m.strip_prefix("right_") == Some(rest))?;
+            Some((l, r))
+        })
+        .collect()
+}
+
+/// Landmark `l`'s usable observations: (camera, pixel, visibility) in each view that found
+/// the person, sees it (visibility at least [`MIN_VISIBILITY`]) and has it inside the image.
+fn observations(
+    cams: &[Camera],
+    views: &[Option<Vec<[f64; 3]>>],
+    l: usize,
+) -> Vec<(usize, Vector2<f64>, f64)> {
+    views
+        .iter()
+        .enumerate()
+        .filter_map(|(c, v)| {
+            let [x, y, vis] = v.as_ref()?[l];
+            (vis >= MIN_VISIBILITY && cams[c].in_image(&Vector2::new(x, y))).then_some((
+                c,
+                Vector2::new(x, y),
+                vis,
+            ))
         })
         .collect()
 }
@@ -258,5 +386,31 @@ mod tests {
         let p = triangulate_frame(&cams, &frame)[0].clone().unwrap();
         assert!((p.position - truth[0]).norm() < 1e-6, "{:?}", p.position);
         assert_eq!(p.views, [0, 1, 3, 5]);
+    }
+
+    #[test]
+    fn views_that_swap_a_left_and_right_pair_are_put_right() {
+        let cams = ring();
+        // 33 distinct points on a body-sized helix.
+        let truth: Vec<Vector3<f64>> = (0..crate::person::LANDMARKS)
+            .map(|l| {
+                let a = l as f64 * 0.7;
+                Vector3::new(0.25 * a.cos(), 0.2 * a.sin(), 0.1 + 0.05 * l as f64)
+            })
+            .collect();
+        let mut frame = frame_of(&cams, &truth);
+        let names = crate::person::LANDMARK_NAMES;
+        let at = |n: &str| names.iter().position(|m| *m == n).unwrap();
+        let (knee_l, knee_r) = (at("left_knee"), at("right_knee"));
+        // Two of six views take the left knee for the right (dropping them would leave four).
+        for c in [1, 4] {
+            frame.views[c].landmarks.swap(knee_l, knee_r);
+        }
+        let points = triangulate_frame(&cams, &frame);
+        for k in [knee_l, knee_r] {
+            let p = points[k].as_ref().expect("triangulated");
+            assert!((p.position - truth[k]).norm() < 1e-6, "{}", names[k]);
+            assert_eq!(p.views.len(), cams.len(), "{}", names[k]);
+        }
     }
 }

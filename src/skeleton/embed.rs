@@ -310,47 +310,66 @@ pub fn embed_from(
     let total: f64 = lengths.iter().sum::<f64>().max(1e-9);
     let weights: Vec<f64> = lengths.iter().map(|l| l / total).collect();
 
-    let (placed, scale) = match start {
-        // A first guess (the person model's keypoints): its joints, at its own scale.
-        Some(start) => {
-            if start.bones.len() != template.bones.len() {
-                return Err("the first guess does not have the template's bones".into());
-            }
-            let mut joints = tpl.clone();
-            for (b, bone) in start.bones.iter().enumerate() {
-                joints.points[tpl.ends[b].0] = to_z * bone.head;
-                joints.points[tpl.ends[b].1] = to_z * bone.tail;
-            }
-            let guessed: f64 = start.bones.iter().map(|b| b.length()).sum();
-            (joints, guessed / total)
+    // The starts: the first guess (the person model's keypoints: its joints, at its own
+    // scale) when there is one, and the template's own placement in the interior.
+    let mut starts: Vec<(Joints, f64)> = Vec::new();
+    if let Some(start) = start {
+        if start.bones.len() != template.bones.len() {
+            return Err("the first guess does not have the template's bones".into());
         }
-        None => place(&interior, template, &tpl, &weights)?,
-    };
-    let tips = limb_extremities(&interior, template, &placed);
-    let finish = |joints: Joints| -> Result<(Joints, f64, Unheld), Refusal> {
+        let mut joints = tpl.clone();
+        for (b, bone) in start.bones.iter().enumerate() {
+            joints.points[tpl.ends[b].0] = to_z * bone.head;
+            joints.points[tpl.ends[b].1] = to_z * bone.tail;
+        }
+        let guessed: f64 = start.bones.iter().map(|b| b.length()).sum();
+        starts.push((joints, guessed / total));
+    }
+    let placed = place(&interior, template, &tpl, &weights);
+    let mut refusals: Vec<String> = Vec::new();
+    match placed {
+        Ok(p) => starts.push(p),
+        Err(e) if starts.is_empty() => return Err(e),
+        Err(e) => refusals.push(format!("the template's own placement: {e}")),
+    }
+    // The surface's extremities, seen from the torso of the template's own placement (the
+    // guess's where that failed).
+    let tips = limb_extremities(&interior, template, &starts[starts.len() - 1].0);
+    let finish = |joints: Joints, scale: f64| -> Result<(Joints, f64, Unheld), Refusal> {
         let refined = descend_joints(&interior, template, &tpl, joints, scale, &weights);
         check(&interior, template, &refined)?;
         let uncovered = check_coverage(&interior, template, &refined, &local)?;
         let empty = unheld(template, &refined, &tips);
         Ok((refined, uncovered, empty))
     };
-    // Two tries: the placement's own pose, and its limbs followed through the interior to
-    // the surface's extremities (a real body's limbs raised, forward or bent). The one
+    // From each start two tries: its own pose, and its limbs followed through the interior
+    // to the surface's extremities (a real body's limbs raised, forward or bent). The one
     // that leaves fewer limb-shaped extremities without a bone wins, then the one that
-    // leaves less of the surface unexplained.
-    let first = finish(placed.clone());
-    let second = finish(follow_limbs(template, placed, &tips));
-    let (refined, uncovered_share, empty) = match (first, second) {
-        (Ok(a), Ok(b)) => {
-            if (b.2.rank(), b.1) < (a.2.rank(), a.1) {
-                b
-            } else {
-                a
+    // leaves less of the surface unexplained; the earlier on a tie.
+    let mut best: Option<(Joints, f64, Unheld)> = None;
+    for (placed, scale) in starts {
+        let followed = follow_limbs(template, placed.clone(), &tips);
+        for tried in [finish(placed, scale), finish(followed, scale)] {
+            match tried {
+                Ok(t) => {
+                    if best
+                        .as_ref()
+                        .is_none_or(|b| (t.2.rank(), t.1) < (b.2.rank(), b.1))
+                    {
+                        best = Some(t);
+                    }
+                }
+                Err(e) => refusals.push(e.0),
             }
         }
-        (Ok(a), Err(_)) => a,
-        (Err(_), Ok(b)) => b,
-        (Err(a), Err(b)) => return Err(format!("{b} (with the template's pose: {a})").into()),
+    }
+    let Some((refined, uncovered_share, empty)) = best else {
+        let last = refusals.pop().unwrap_or_default();
+        return Err(if refusals.is_empty() {
+            last.into()
+        } else {
+            format!("{last} (other tries: {})", refusals.join("; ")).into()
+        });
     };
     if let (true, Some(&e)) = (empty.misplaced, empty.parts.first()) {
         let tip = tips[e].path.last().copied().unwrap_or_default();

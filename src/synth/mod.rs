@@ -95,6 +95,17 @@ fn box_yaml(
     ))
 }
 
+/// What the humanoid wears (`pipeline synth --look`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Look {
+    /// A saturated noise pattern everywhere but the plain trousers: what photo-consistency
+    /// locks onto best.
+    #[default]
+    Costume,
+    /// A person's look ([`texture::Material`]): skin, hair, a shirt, trousers, shoes.
+    Person,
+}
+
 /// Which motion the humanoid performs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Motion {
@@ -151,6 +162,8 @@ pub struct SynthOptions {
     pub proportions: humanoid::Proportions,
     /// Whether the humanoid wears a dress (`--dress`: [`body::Skirt`]).
     pub dress: bool,
+    /// What the humanoid wears (`--look`).
+    pub look: Look,
     /// A pose the humanoid holds in every frame instead of a motion (`--pose`).
     pub pose: Option<humanoid::HeldPose>,
     /// Degrees by which the written world is tilted (`--world-tilt`): the calibration and
@@ -175,6 +188,7 @@ impl SynthOptions {
             motion: Motion::Default,
             proportions: Default::default(),
             dress: false,
+            look: Look::Costume,
             pose: None,
             world_tilt_deg: 0.0,
         }
@@ -204,6 +218,9 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     }
     if opts.dress && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--dress needs --scene humanoid".into()));
+    }
+    if opts.look != Look::Costume && opts.scene != SceneKind::Humanoid {
+        return Err(Error::Usage("--look needs --scene humanoid".into()));
     }
     if opts.pose.is_some() && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--pose needs --scene humanoid".into()));
@@ -258,10 +275,14 @@ pub struct Subject {
     pub labels: Vec<usize>,
     /// 1 where the vertex wears the plain material.
     pub plain: Vec<f64>,
+    /// Under [`Look::Person`], what each vertex wears.
+    pub materials: Option<Vec<texture::Material>>,
+    /// The head's centre (rest pose, metres) and radius, metres.
+    pub head: Option<(nalgebra::Vector3<f64>, f64)>,
 }
 
 impl Subject {
-    pub fn new(body: &Body, spacing: f64) -> Subject {
+    pub fn new(body: &Body, spacing: f64, look: Look) -> Subject {
         let rest = body.rest_mesh(spacing);
         let weights = body.skin_weights(&rest, 0.025);
         let labels = crate::skeleton::skinning::labels(&weights);
@@ -274,13 +295,43 @@ impl Subject {
                     .sum()
             })
             .collect();
+        let materials = (look == Look::Person).then(|| person_materials(body, &labels));
+        // The head's centre and radius at rest, where the face is drawn.
+        let head = body.skeleton.bone_index("head").map(|b| {
+            let bone = &body.skeleton.bones[b];
+            let (r0, r1) = body.radii[b];
+            ((bone.head + bone.tail) / 2.0, r0.max(r1).max(1e-3))
+        });
         Subject {
             rest,
             weights,
             labels,
             plain,
+            materials,
+            head,
         }
     }
+}
+
+/// What each rest vertex wears under [`Look::Person`], by its dominant bone: skin on the
+/// neck, forearms and hands; a face and hair on the head ([`texture::head_albedo`]); a shirt on the trunk and upper arms; trousers from the hips down; shoes.
+fn person_materials(body: &Body, labels: &[usize]) -> Vec<texture::Material> {
+    use texture::Material;
+    labels
+        .iter()
+        .map(|&b| {
+            let bone = &body.skeleton.bones[b];
+            let name = bone.name.as_str();
+            match name {
+                "head" => Material::Head,
+                "neck" => Material::Skin,
+                n if n.starts_with("forearm") || n.starts_with("hand") => Material::Skin,
+                n if n.starts_with("upper_arm") || n == "chest" || n == "spine" => Material::Shirt,
+                n if n.starts_with("foot") => Material::Shoe,
+                _ => Material::Trousers,
+            }
+        })
+        .collect()
 }
 
 /// What `generate` wrote.
@@ -308,7 +359,7 @@ fn progress(len: u64, what: &str) -> ProgressBar {
 pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     let start = Instant::now();
     let scene = build_scene(opts)?;
-    let subject = Subject::new(&scene.body, opts.mesh_spacing);
+    let subject = Subject::new(&scene.body, opts.mesh_spacing, opts.look);
     let seq_dir = opts.out.join("data").join(&scene.name);
     let stem = crate::dataset::frame_stem;
 
@@ -345,6 +396,8 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
             normals,
             rest: &subject.rest.vertices,
             plain: &subject.plain,
+            materials: subject.materials.as_deref(),
+            head: subject.head,
         };
         // A slight frame-to-frame brightness flicker, as real lighting has.
         let flicker = 1.0 + 0.01 * crate::rng::Rng::new(opts.seed, 500_000 + f as u64).normal();

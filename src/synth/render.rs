@@ -161,6 +161,10 @@ pub struct Surface<'a> {
     pub rest: &'a [Vector3<f64>],
     /// 1 where a vertex wears the plain material, 0 where textured.
     pub plain: &'a [f64],
+    /// What each vertex wears, under `--look person` (else the costume and `plain`).
+    pub materials: Option<&'a [texture::Material]>,
+    /// The head's centre (rest pose, metres) and radius (metres), where a face is drawn.
+    pub head: Option<(Vector3<f64>, f64)>,
 }
 
 /// Converts radiance to 8-bit with gain, offset, flicker and noise.
@@ -205,7 +209,16 @@ pub fn render_frame(
                 let plain = surface.plain[t[0]] * f.bary[0]
                     + surface.plain[t[1]] * f.bary[1]
                     + surface.plain[t[2]] * f.bary[2];
-                let albedo = if plain >= 0.5 {
+                // A person's look: the material of the fragment's nearest vertex.
+                let nearest = (0..3).max_by(|&a, &b| f.bary[a].total_cmp(&f.bary[b]));
+                let albedo = if let (Some(m), Some(k)) = (surface.materials, nearest) {
+                    match (m[t[k]], surface.head) {
+                        (texture::Material::Head, Some((centre, r))) => {
+                            texture::head_albedo(rest, (rest - centre) / r, seed)
+                        }
+                        (material, _) => texture::material_albedo(material, rest, seed),
+                    }
+                } else if plain >= 0.5 {
                     texture::plain_albedo(rest, seed)
                 } else {
                     texture::subject_albedo(rest, seed)

@@ -72,6 +72,73 @@ pub fn plain_albedo(p: Vector3<f64>, salt: u64) -> Vector3<f64> {
     Vector3::new(0.10, 0.13, 0.30) * v
 }
 
+/// What a point of the subject wears under `pipeline synth --look person`: a person's look
+/// (skin, hair, a shirt, trousers, shoes), so that a person model recognizes the figure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Material {
+    /// Neck, forearms and hands: skin with faint mottling.
+    Skin,
+    /// The head: a face (eyes, brows, mouth) in front, hair over the top and back
+    /// ([`head_albedo`]).
+    Head,
+    /// Chest, belly and upper arms: a red shirt with a woven pattern (photo-consistency
+    /// still finds a peak on it).
+    Shirt,
+    /// Hips and legs: the plain trousers ([`plain_albedo`]).
+    Trousers,
+    /// Feet: white shoes.
+    Shoe,
+}
+
+/// The albedo (RGB in [0, 1]) of material `m` at rest-pose point `p`, metres.
+pub fn material_albedo(m: Material, p: Vector3<f64>, salt: u64) -> Vector3<f64> {
+    let mottle = |amount: f64, sizes: &[f64], s: u64| 1.0 - amount + amount * octaves(p, sizes, s);
+    match m {
+        Material::Skin => skin(p, salt),
+        Material::Head => skin(p, salt),
+        Material::Shirt => {
+            let weave = contrast(octaves(p, &[0.015, 0.04, 0.10], salt + 707), 4.0);
+            Vector3::new(0.78, 0.20, 0.18) * (0.55 + 0.45 * weave)
+        }
+        Material::Trousers => plain_albedo(p, salt),
+        Material::Shoe => Vector3::new(0.88, 0.88, 0.85) * mottle(0.1, &[0.03], salt + 808),
+    }
+}
+
+fn skin(p: Vector3<f64>, salt: u64) -> Vector3<f64> {
+    Vector3::new(0.87, 0.66, 0.54) * (0.85 + 0.15 * octaves(p, &[0.015, 0.04], salt + 505))
+}
+
+fn hair(p: Vector3<f64>, salt: u64) -> Vector3<f64> {
+    Vector3::new(0.20, 0.13, 0.08) * (0.7 + 0.3 * octaves(p, &[0.01, 0.03], salt + 606))
+}
+
+/// The head's albedo at rest point `p`, `d` being `p` from the head's centre in head radii
+/// (the figure faces -y, z up): hair above the brow and over the back, and a face in front
+/// with dark eyes on white, brows and a mouth, as a face detector expects.
+pub fn head_albedo(p: Vector3<f64>, d: Vector3<f64>, salt: u64) -> Vector3<f64> {
+    if d.z > 0.45 || (d.y > 0.1 && d.z > -0.7) {
+        return hair(p, salt);
+    }
+    if d.y < -0.5 {
+        let (x, z) = (d.x.abs(), d.z);
+        let eye = ((x - 0.33).powi(2) + ((z - 0.1) / 0.7).powi(2)).sqrt();
+        if eye < 0.07 {
+            return Vector3::new(0.12, 0.08, 0.06);
+        }
+        if eye < 0.14 {
+            return Vector3::new(0.92, 0.92, 0.9);
+        }
+        if (0.15..0.5).contains(&x) && (0.27..0.34).contains(&z) {
+            return hair(p, salt);
+        }
+        if x < 0.22 && (-0.47..-0.39).contains(&z) {
+            return Vector3::new(0.62, 0.28, 0.28);
+        }
+    }
+    skin(p, salt)
+}
+
 /// The room's albedo at world point `p` on a surface facing `normal`: a wooden-looking floor
 /// with tiles, and plastered walls with mild mottling. Deliberately less saturated than the
 /// subject, as a studio would be.
