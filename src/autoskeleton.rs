@@ -70,7 +70,7 @@ pub struct Written {
     /// The share of the surface far from every bone
     /// ([`crate::skeleton::embed::Embedding::uncovered_share`]).
     pub uncovered_share: f64,
-    /// Without `export.up_axis`: the up direction found and its cues (one line).
+    /// Without `world.up` (or `export.up_axis`): the up direction found and its cues (one line).
     pub up_found: Option<String>,
 }
 
@@ -271,8 +271,8 @@ pub fn make(job: &Job, template: &Template, frame: Option<u32>, force: bool) -> 
         )));
     }
     // The world's up: pipeline.yaml's, else as the cameras show it.
-    let (up, up_found) = match job.config.export.up_axis {
-        Some(axis) => (crate::geometry::axes::up_vector(axis), None),
+    let (up, up_found) = match job.config.given_up() {
+        Some(up) => (up, None),
         None => {
             let e = crate::geometry::up::estimate(&seq.cameras, None).ok_or_else(|| {
                 Error::Usage("pipeline skeleton: the capture has no cameras".into())

@@ -74,6 +74,39 @@ struct PipelineFile {
     export: ExportParams,
     #[serde(default)]
     sync: SyncParams,
+    #[serde(default)]
+    world: WorldParams,
+}
+
+/// Facts of the capture's world frame (pipeline.yaml key `world`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WorldParams {
+    /// The world's up direction: an axis (`+z`) or any vector (`[0.1, -0.4, 0.9]`, scaled
+    /// to unit length). Unset: `export.up_axis` (its old spelling) if given, else found from
+    /// the cameras ([`crate::geometry::up`]).
+    pub up: Option<crate::geometry::axes::UpDirection>,
+    /// The floor's height along the up direction, metres (the floor is the plane
+    /// up . x = floor). Unset: the lowest point of the posed body model over the exported
+    /// frames.
+    pub floor: Option<f64>,
+}
+
+/// Checks the world's parameters against each other and `export.up_axis`.
+fn validate_world(w: &WorldParams, export: &ExportParams) -> std::result::Result<(), Refusal> {
+    if w.up.is_some() && export.up_axis.is_some() {
+        return Err(
+            "both world.up and export.up_axis give the world's up: keep world.up \
+                    (export.up_axis is its old spelling) and remove export.up_axis"
+                .into(),
+        );
+    }
+    if let Some(f) = w.floor {
+        if !(f.is_finite() && f.abs() <= 1000.0) {
+            return Err(format!("key 'world.floor': {f} is not a height in metres").into());
+        }
+    }
+    Ok(())
 }
 
 /// Synchronisation of cameras recorded as videos (pipeline.yaml key `sync`).
@@ -120,6 +153,7 @@ pub fn default_values() -> Result<Vec<(String, serde_json::Value)>> {
         ("fit", serde_json::to_value(FitParams::default())),
         ("export", serde_json::to_value(ExportParams::default())),
         ("sync", serde_json::to_value(SyncParams::default())),
+        ("world", serde_json::to_value(WorldParams::default())),
     ];
     let mut out = Vec::new();
     for (name, value) in sections {
@@ -169,9 +203,21 @@ pub struct Config {
     pub export: ExportParams,
     /// Video synchronisation.
     pub sync: SyncParams,
+    /// The world's up and floor.
+    pub world: WorldParams,
 }
 
 impl Config {
+    /// The world's up as pipeline.yaml gives it (`world.up`, else the old
+    /// `export.up_axis`), unit length; `None` when the capture's own up is to be found.
+    pub fn given_up(&self) -> Option<nalgebra::Vector3<f64>> {
+        match (&self.world.up, self.export.up_axis) {
+            (Some(u), _) => Some(u.vector()),
+            (None, Some(axis)) => Some(crate::geometry::axes::up_vector(axis)),
+            (None, None) => None,
+        }
+    }
+
     /// Reads and checks pipeline.yaml (paths must exist where they are inputs).
     pub fn load(path: &Path) -> Result<Config> {
         let file: PipelineFile = crate::yaml::read(path)?;
@@ -201,6 +247,7 @@ impl Config {
             fit: file.fit,
             export: file.export,
             sync: file.sync,
+            world: file.world,
         };
         crate::recon::silhouette::validate(&config.silhouette)
             .map_err(|m| Error::invalid(path, m))?;
@@ -209,6 +256,7 @@ impl Config {
         model::validate(&config.model).map_err(|m| Error::invalid(path, m))?;
         crate::fit::validate(&config.fit).map_err(|m| Error::invalid(path, m))?;
         validate_export(&config.export).map_err(|m| Error::invalid(path, m))?;
+        validate_world(&config.world, &config.export).map_err(|m| Error::invalid(path, m))?;
         if let Some(mesh) = config.model.mesh.as_ref().filter(|m| !m.is_file()) {
             return Err(Error::invalid(
                 path,

@@ -249,7 +249,7 @@ enum Command {
     /// Make the sequence's skeleton.yaml: reconstruct the reference frame and embed a
     /// template skeleton in its surface (bones along the medial axis, the template's
     /// proportions). Writes output/skeleton/bones.ply and output/skeleton/overlay.png to
-    /// check it. The world's up is export.up_axis, or else found from the cameras (printed).
+    /// check it. The world's up is world.up (or export.up_axis), else found from the cameras.
     Skeleton {
         /// The pipeline.yaml naming the calibration and the sequence.
         file: PathBuf,

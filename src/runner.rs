@@ -333,37 +333,40 @@ impl Job {
 
     /// The world's up as the capture shows it (the cameras, and the subject's `standing`
     /// axis where the person model saw it), on stdout; warnings when its cues disagree, or
-    /// when `export.up_axis` lies far from it.
+    /// when the up pipeline.yaml gives (`world.up`, or the old `export.up_axis`) lies far
+    /// from it.
     fn report_up(&self, standing: Option<nalgebra::Vector3<f64>>) -> Vec<String> {
         use crate::geometry::up;
         let Some(e) = up::estimate(&self.sequence.cameras, standing) else {
             return Vec::new();
         };
         let mut out = Vec::new();
-        match self.config.export.up_axis {
+        match self.config.given_up() {
             None => {
                 println!("{}", e.describe());
                 if e.spread_deg() > up::DISAGREEMENT_DEG {
                     out.push(format!(
                         "the cues for the world's up disagree by {:.0} degrees (a rig on one \
                          side of the subject, tilted cameras): if the skeleton or the exports \
-                         stand askew, set export.up_axis",
+                         stand askew, set world.up",
                         e.spread_deg()
                     ));
                 }
             }
-            Some(axis) => {
-                let given = crate::geometry::axes::up_vector(axis);
+            Some(given) => {
                 let off = up::angle_deg(&given, &e.up);
+                let v =
+                    |u: &nalgebra::Vector3<f64>| format!("({:+.3}, {:+.3}, {:+.3})", u.x, u.y, u.z);
                 println!(
-                    "up: export.up_axis {} is {off:.1} degrees from the up the capture shows",
-                    String::from(axis)
+                    "up: the given up {} is {off:.1} degrees from the up the capture shows",
+                    v(&given)
                 );
                 if off > 30.0 && e.spread_deg() <= up::DISAGREEMENT_DEG {
                     out.push(format!(
-                        "export.up_axis is {} but the capture's up is {} ({off:.0} degrees away): \
-                         is the axis right?",
-                        String::from(axis),
+                        "the given up {} lies {off:.0} degrees from the capture's up {} \
+                         (nearest axis {}): is world.up (or export.up_axis) right?",
+                        v(&given),
+                        v(&e.up),
                         up::nearest_axis(&e.up)
                     ));
                 }

@@ -8,7 +8,7 @@ turned back from +Y-up export axes to world axes (--up, as pipeline.yaml's expor
 and compared with joints.csv: each bone's head is the joint of its name, its tail the End
 Site of a leaf, the `<bone>_tail` joint, or the child joint at its tail.
 
-Usage: python3 tools/check_bvh.py FILE.bvh joints.csv [--up +z] [--tolerance 0.001]
+Usage: python3 tools/check_bvh.py FILE.bvh joints.csv [--up +z] [--floor F] [--tolerance 0.001]
 Prints the largest distance (metres) and exits 1 if it exceeds the tolerance.
 """
 import argparse
@@ -21,9 +21,10 @@ import glm
 from export_axes import TO_Y_UP
 
 
-def to_world(p, up):
-    """C^T p: export axes back to world axes."""
+def to_world(p, up, floor=0.0):
+    """C^T (p + floor Y): export axes (floor at Y = 0) back to world axes."""
     c = TO_Y_UP[up]
+    p = [p[0], p[1] + floor, p[2]]
     return [sum(c[r][k] * p[r] for r in range(3)) for k in range(3)]
 
 
@@ -53,6 +54,7 @@ def main():
     ap.add_argument("bvh")
     ap.add_argument("joints")
     ap.add_argument("--up", default="+y", choices=sorted(TO_Y_UP))
+    ap.add_argument("--floor", type=float, default=0.0, help="the floor's height along up, metres (export/world.yaml)")
     ap.add_argument("--tolerance", type=float, default=0.001)
     a = ap.parse_args()
 
@@ -91,10 +93,10 @@ def main():
                 candidates = [joints[bone + "_tail"].PositionWorld]
             else:
                 candidates = [c.PositionWorld for c in j.Children]
-            h = to_world(list(j.PositionWorld), a.up)
+            h = to_world(list(j.PositionWorld), a.up, a.floor)
             dh = sum((x - y) ** 2 for x, y in zip(h, head)) ** 0.5
             dt = min(
-                sum((x - y) ** 2 for x, y in zip(to_world(list(c), a.up), tail)) ** 0.5
+                sum((x - y) ** 2 for x, y in zip(to_world(list(c), a.up, a.floor), tail)) ** 0.5
                 for c in candidates
             )
             for d, what in ((dh, "head"), (dt, "tail")):

@@ -7,7 +7,7 @@ Each marker's positions are scaled to metres by the file's declared units, turne
 joints.csv: each bone's head is the marker of its name, its tail the marker `<bone>_tail`
 or (where a child starts there) the marker of that child.
 
-Usage: python3 tools/check_markers.py FILE.trc|FILE.c3d joints.csv [--up +z] [--tolerance 0.0001]
+Usage: python3 tools/check_markers.py FILE.trc|FILE.c3d joints.csv [--up +z] [--floor F] [--tolerance 0.0001]
 Prints the frame and marker counts and the largest distance (metres); exits 1 above the
 tolerance or when a joint has no marker.
 """
@@ -50,6 +50,7 @@ def main():
     ap.add_argument("file")
     ap.add_argument("joints")
     ap.add_argument("--up", default="+z")
+    ap.add_argument("--floor", type=float, default=0.0, help="the floor's height along up, metres (export/world.yaml)")
     ap.add_argument("--tolerance", type=float, default=0.0001)
     a = ap.parse_args()
     units, frames = (read_c3d if a.file.lower().endswith(".c3d") else read_trc)(a.file)
@@ -57,8 +58,9 @@ def main():
     c = TO_Y_UP[a.up]
 
     def world(p):
-        # x_world = C^T x_export
-        return [sum(c[r][i] * p[r] * scale for r in range(3)) for i in range(3)]
+        # x_world = C^T (x_export + floor Y)
+        q = [p[0] * scale, p[1] * scale + a.floor, p[2] * scale]
+        return [sum(c[r][i] * q[r] for r in range(3)) for i in range(3)]
 
     rows = list(csv.DictReader(open(a.joints)))
     order = sorted({int(r["frame"]) for r in rows})

@@ -10,10 +10,11 @@
 //!
 //! Rotations are the pose's local rotations L_b (relative to t0, in the parent's frame,
 //! [`crate::skeleton::pose`]) as Euler angles in degrees in the declared channel order: for
-//! `Zrotation Xrotation Yrotation`, L = Rz(a) Rx(b) Ry(c). With a known up axis, positions
-//! are turned by C and rotations become C L Cᵀ ([`crate::geometry::axes`]). Units are metres.
+//! `Zrotation Xrotation Yrotation`, L = Rz(a) Rx(b) Ry(c). Positions x are written as
+//! C x - floor Y (offsets as C d) and rotations as C L Cᵀ, so the world's up is +Y and its
+//! floor Y = 0 ([`crate::geometry::axes::ExportFrame`]). Units are metres.
 
-use crate::geometry::axes::{to_y_up, RotationOrder, UpAxis};
+use crate::geometry::axes::{ExportFrame, RotationOrder};
 use crate::skeleton::{Pose, Skeleton};
 use nalgebra::{Rotation3, Vector3};
 use std::fmt::Write as _;
@@ -117,10 +118,10 @@ pub fn to_bvh(
     skeleton: &Skeleton,
     poses: &[(u32, Pose)],
     frame_rate: f64,
-    up: Option<UpAxis>,
+    frame: &ExportFrame,
     order: RotationOrder,
 ) -> String {
-    let c = to_y_up(up);
+    let c = frame.rotation;
     let mut h = Hierarchy {
         skeleton,
         children: skeleton.children(),
@@ -145,7 +146,7 @@ pub fn to_bvh(
             };
             let bone = &skeleton.bones[b];
             if bone.parent.is_none() {
-                let p = c * (bone.head + pose.translation);
+                let p = frame.point(&(bone.head + pose.translation));
                 line.extend([p.x, p.y, p.z].map(|x| format!("{x:.6}")));
             }
             let local = c * pose.rotations[b] * c.inverse();

@@ -10,10 +10,11 @@
 //! WEIGHTS_0, renormalized), normals and part colours (COLOR_0). glTF's joint matrices
 //! `world_b · IBM_b` then reproduce the model's linear blend skinning exactly.
 //!
-//! Axes: with a known up axis every position is turned by C ([`crate::geometry::axes::to_y_up`]) and
-//! every rotation R becomes C R Cᵀ, so the scene stands on glTF's +Y.
+//! Axes: every position x is written as C x - floor Y and every rotation R as C R Cᵀ
+//! ([`crate::geometry::axes::ExportFrame`]), so the scene stands on glTF's +Y with its floor
+//! at Y = 0.
 
-use crate::geometry::axes::{to_y_up, UpAxis};
+use crate::geometry::axes::ExportFrame;
 use crate::skeleton::model::BodyModel;
 use crate::skeleton::Pose;
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
@@ -127,10 +128,9 @@ pub fn to_glb(
     model: &BodyModel,
     poses: &[(u32, Pose)],
     frame_rate: f64,
-    up: Option<UpAxis>,
+    frame: &ExportFrame,
     name: &str,
 ) -> Vec<u8> {
-    let c = to_y_up(up);
     let skeleton = &model.skeleton;
     let n_bones = skeleton.bones.len();
     let mut buf = Buffer::default();
@@ -140,8 +140,8 @@ pub fn to_glb(
     let mut positions = Vec::with_capacity(3 * mesh.vertices.len());
     let mut normals = Vec::with_capacity(3 * mesh.vertices.len());
     for (v, n) in mesh.vertices.iter().zip(mesh.vertex_normals()) {
-        push3(&mut positions, &(c * v));
-        let n = c * n;
+        push3(&mut positions, &frame.point(v));
+        let n = frame.vector(&n);
         let n = if n.norm() > 1e-12 {
             n.normalize()
         } else {
@@ -181,7 +181,11 @@ pub fn to_glb(
     let index_acc = buf.accessor(index_view, UNSIGNED_INT, 3 * mesh.triangles.len(), "SCALAR");
 
     // Inverse bind matrices (column-major): translation by minus each t0 head.
-    let heads: Vec<Vector3<f64>> = skeleton.bones.iter().map(|b| c * b.head).collect();
+    let heads: Vec<Vector3<f64>> = skeleton
+        .bones
+        .iter()
+        .map(|b| frame.point(&b.head))
+        .collect();
     let mut ibm = Vec::with_capacity(16 * n_bones);
     for h in &heads {
         ibm.extend([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
@@ -242,13 +246,13 @@ pub fn to_glb(
             if bone.parent.is_none() {
                 let mut t = Vec::with_capacity(3 * poses.len());
                 for (_, pose) in poses {
-                    push3(&mut t, &(c * (bone.head + pose.translation)));
+                    push3(&mut t, &frame.point(&(bone.head + pose.translation)));
                 }
                 add_channel(b, "translation", t, "VEC3");
             }
             let r: Vec<f32> = poses
                 .iter()
-                .flat_map(|(_, pose)| quaternion(&(c * pose.rotations[b] * c.inverse())))
+                .flat_map(|(_, pose)| quaternion(&frame.turn(&pose.rotations[b])))
                 .collect();
             add_channel(b, "rotation", r, "VEC4");
         }

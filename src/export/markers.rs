@@ -3,12 +3,12 @@
 //!
 //! A marker is a joint of joints.csv, named as in the BVH export: each bone's head (named
 //! as the bone) and each tail that is no child's head (`<bone>_tail`), so a chain's joints
-//! appear once. Both files hold millimetres in the export axes (+Y up when
-//! `export.up_axis` is known, as OpenSim expects; [`crate::geometry::axes::to_y_up`]), one
+//! appear once. Both files hold millimetres in the export axes (the world's up as +Y and its
+//! floor at Y = 0, as OpenSim expects; [`crate::geometry::axes::ExportFrame`]), one
 //! row per fitted frame, timed at the capture's frame rate (frame f at f / rate seconds).
 
 use super::bvh::{joint_name, tail_is_a_head};
-use crate::geometry::axes::{to_y_up, UpAxis};
+use crate::geometry::axes::ExportFrame;
 use crate::skeleton::{Pose, Skeleton};
 use nalgebra::Vector3;
 use std::fmt::Write as _;
@@ -90,10 +90,9 @@ pub fn check_c3d(skeleton: &Skeleton, first: u32, last: u32) -> Result<(), Strin
 fn positions(
     skeleton: &Skeleton,
     poses: &[(u32, Pose)],
-    up: Option<UpAxis>,
+    frame: &ExportFrame,
     markers: &[(String, Joint)],
 ) -> Vec<Vec<Vector3<f64>>> {
-    let c = to_y_up(up);
     poses
         .iter()
         .map(|(_, pose)| {
@@ -105,7 +104,7 @@ fn positions(
                         Joint::Head(b) => joints[b].0,
                         Joint::Tail(b) => joints[b].1,
                     };
-                    c * p * 1000.0
+                    frame.point(&p) * 1000.0
                 })
                 .collect()
         })
@@ -120,10 +119,10 @@ pub fn to_trc(
     skeleton: &Skeleton,
     poses: &[(u32, Pose)],
     rate: f64,
-    up: Option<UpAxis>,
+    frame: &ExportFrame,
 ) -> String {
     let markers = markers(skeleton);
-    let rows = positions(skeleton, poses, up, &markers);
+    let rows = positions(skeleton, poses, frame, &markers);
     let mut t = String::new();
     let _ = writeln!(t, "PathFileType\t4\t(X/Y/Z)\t{file_name}");
     let _ = writeln!(
@@ -169,7 +168,7 @@ pub fn to_c3d(
     skeleton: &Skeleton,
     poses: &[(u32, Pose)],
     rate: f64,
-    up: Option<UpAxis>,
+    frame: &ExportFrame,
 ) -> Result<Vec<u8>, String> {
     let markers = markers(skeleton);
     let first = poses.first().map_or(0, |p| p.0) as usize + 1;
@@ -200,7 +199,7 @@ pub fn to_c3d(
     word(&mut header, 9, 0); // analog samples per frame and channel
     header[20..24].copy_from_slice(&(rate as f32).to_le_bytes());
 
-    let rows = positions(skeleton, poses, up, &markers);
+    let rows = positions(skeleton, poses, frame, &markers);
     let mut out = header;
     let mut p = params;
     p.resize(param_blocks * BLOCK, 0);

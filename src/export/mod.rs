@@ -5,7 +5,7 @@
 //! `pipeline export FILE --format F` rewrites one format from what the cache holds.
 //!
 //! Layout under `<output>/export/`: `<sequence>.glb`, `<sequence>.bvh`, `<sequence>.trc`,
-//! `<sequence>.c3d`,
+//! `<sequence>.c3d` and `world.yaml` (how they place the world: [`export_frame`]),
 //! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit) and
 //! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `contact_sheets/NNNNNN.png`.
 
@@ -44,6 +44,48 @@ pub fn load_motion(ctx: &Context, frames: &[u32]) -> Result<(BodyModel, Vec<(u32
         })
         .collect::<Result<Vec<_>>>()?;
     Ok((model, poses))
+}
+
+/// How the exports place the world (up to +Y, the floor at 0) for `model` moved by `poses`:
+/// the up from pipeline.yaml or found from the cameras, the floor from `world.floor` or the
+/// lowest point of the posed model over the frames. The second value says which, for the
+/// summary.
+pub fn export_frame(
+    ctx: &Context,
+    model: &BodyModel,
+    poses: &[(u32, Pose)],
+) -> (crate::geometry::axes::ExportFrame, String) {
+    use crate::geometry::axes::ExportFrame;
+    let (up, whose) = match ctx.config.given_up() {
+        Some(up) => (up, "given"),
+        None => match crate::geometry::up::estimate(&ctx.sequence.cameras, None) {
+            Some(e) => (e.up, "found from the cameras"),
+            None => return (ExportFrame::identity(), "axes unchanged".into()),
+        },
+    };
+    let (floor, how) = match ctx.config.world.floor {
+        Some(f) => (f, "given"),
+        None => (
+            poses
+                .par_iter()
+                .map(|(_, pose)| {
+                    model
+                        .pose(pose)
+                        .vertices
+                        .iter()
+                        .map(|v| up.dot(v))
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .reduce(|| f64::INFINITY, f64::min),
+            "the lowest point of the posed model",
+        ),
+    };
+    let floor = if floor.is_finite() { floor } else { 0.0 };
+    let about = format!(
+        "up ({:+.3}, {:+.3}, {:+.3}) {whose} -> +Y; floor {floor:.3} m along it ({how}) -> Y = 0",
+        up.x, up.y, up.z
+    );
+    (ExportFrame::new(&up, floor), about)
 }
 
 /// `pipeline export`: checks that the cache holds what the exports read, up to date for the
@@ -136,32 +178,43 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
             crate::config::ANIMATION_RATE
         ));
     }
-    // The one-file formats of the motion: each file's name and bytes.
+    // The one-file formats of the motion: each file's name and bytes, in the export frame.
+    let frame = match motion.as_ref() {
+        Some((model, poses)) if formats.iter().any(|f| f.is_timed()) => {
+            let (frame, about) = export_frame(ctx, model, poses);
+            println!("export: {about}");
+            let path = out.join("world.yaml");
+            crate::fsutil::write_atomic(&path, crate::yaml::to_string(&frame)?.as_bytes())?;
+            written.outputs.push(path);
+            written.files += 1;
+            Some(frame)
+        }
+        _ => None,
+    };
     for &format in &formats {
-        let Some((model, poses)) = motion.as_ref() else {
+        let (Some((model, poses)), Some(frame)) = (motion.as_ref(), frame.as_ref()) else {
             continue;
         };
         let (path, bytes) = match format {
             Format::Glb => {
                 let path = out.join(format!("{name}.glb"));
-                let bytes = gltf::to_glb(model, poses, animation_rate, p.up_axis, &name);
+                let bytes = gltf::to_glb(model, poses, animation_rate, frame, &name);
                 (path, bytes)
             }
             Format::Bvh => {
                 let order = crate::geometry::axes::RotationOrder::parse(&p.bvh_rotation_order)
                     .map_err(|m| Error::invalid(&ctx.config.path, m))?;
-                let text = bvh::to_bvh(&model.skeleton, poses, animation_rate, p.up_axis, order);
+                let text = bvh::to_bvh(&model.skeleton, poses, animation_rate, frame, order);
                 (out.join(format!("{name}.bvh")), text.into_bytes())
             }
             Format::Trc => {
                 let file = format!("{name}.trc");
-                let text =
-                    markers::to_trc(&file, &model.skeleton, poses, animation_rate, p.up_axis);
+                let text = markers::to_trc(&file, &model.skeleton, poses, animation_rate, frame);
                 (out.join(file), text.into_bytes())
             }
             Format::C3d => {
                 let path = out.join(format!("{name}.c3d"));
-                let bytes = markers::to_c3d(&model.skeleton, poses, animation_rate, p.up_axis)
+                let bytes = markers::to_c3d(&model.skeleton, poses, animation_rate, frame)
                     .map_err(|m| Error::invalid(&path, m))?;
                 (path, bytes)
             }

@@ -61,12 +61,16 @@ pub fn write(job: &Job) -> Result<Written> {
     let cache = &job.cache;
     let model = crate::artifacts::body_model::read(cache)?;
     let cameras = &job.sequence.cameras;
-    let to_y = crate::geometry::axes::to_y_up(job.config.export.up_axis);
-    let c = *to_y.matrix();
-    let up = |v: &Vector3<f64>| c * v;
     let coarse = CoarseModel::new(&model.mesh, MODEL_CELL);
     let frames = job.frames.clone();
     let ctx = job.context();
+    // The exports' frame: the world's up as +Y, its floor at Y = 0.
+    let (frame, _) = {
+        let (_, poses) = crate::export::load_motion(&ctx, &frames)?;
+        crate::export::export_frame(&ctx, &model, &poses)
+    };
+    let up = |v: &Vector3<f64>| frame.point(v);
+    let lift = Vector3::y() * frame.floor;
 
     // Each frame's bone matrices [C R C^T | C (h - R h0)] (world turned Y-up), and the
     // per-camera silhouette IoU of the posed model.
@@ -77,8 +81,12 @@ pub fn write(job: &Job) -> Result<Written> {
             let bones = PosedBones::new(&model.skeleton, &pose);
             let mut m = Vec::with_capacity(12 * bones.rotations.len());
             for b in 0..bones.rotations.len() {
-                let r: Matrix3<f64> = c * bones.rotations[b].matrix() * c.transpose();
-                let t = up(&(bones.heads[b] - bones.rotations[b] * bones.rest_heads[b]));
+                // World x -> R x + t becomes, in the export frame y = C x - f Y,
+                // y -> R' y + C t + (R' - I) f Y with R' = C R Cᵀ.
+                let turned = frame.turn(&bones.rotations[b]);
+                let r: Matrix3<f64> = *turned.matrix();
+                let t = frame.vector(&(bones.heads[b] - bones.rotations[b] * bones.rest_heads[b]))
+                    + (turned * lift - lift);
                 for row in 0..3 {
                     m.extend([r[(row, 0)], r[(row, 1)], r[(row, 2)], t[row]].map(round5));
                 }
@@ -138,7 +146,7 @@ pub fn write(job: &Job) -> Result<Written> {
         .map(|&f| {
             let mesh = |s| -> Result<String> {
                 let m = crate::artifacts::reconstruction::read_mesh(cache, s, f)?;
-                Ok(coarse_surface(&m, &c).to_string())
+                Ok(coarse_surface(&m, &frame).to_string())
             };
             use crate::artifacts::reconstruction::Surface;
             Ok((f, mesh(Surface::Refined)?, mesh(Surface::Hull)?))
@@ -265,13 +273,13 @@ fn round5(x: f64) -> f64 {
 }
 
 /// A surface coarsened and turned Y-up: `{"v": [mm...], "t": [...]}`.
-fn coarse_surface(mesh: &TriMesh, c: &Matrix3<f64>) -> Value {
+fn coarse_surface(mesh: &TriMesh, frame: &crate::geometry::axes::ExportFrame) -> Value {
     let coarse = CoarseModel::new(mesh, SURFACE_CELL).posed(mesh);
     let v: Vec<i64> = coarse
         .vertices
         .iter()
         .flat_map(|p| {
-            let q = c * p;
+            let q = frame.point(p);
             [q.x, q.y, q.z].map(|x| (x * 1000.0).round() as i64)
         })
         .collect();

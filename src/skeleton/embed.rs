@@ -480,7 +480,7 @@ fn place(
         return Err(format!(
             "the reference surface is {:.0} cm wide and {:.0} cm tall: too thin for a body (a \
              body is at least {:.0}% as wide as it is tall); is the subject in this frame, and \
-             export.up_axis right?",
+             world.up right?",
             100.0 * width,
             100.0 * tall,
             100.0 * MIN_WIDTH_SHARE

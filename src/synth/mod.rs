@@ -35,15 +35,21 @@ fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
     } else {
         key_rate
     };
-    // A tilted world says nothing of its up: the tool finds it.
-    let up = if opts.world_tilt_deg == 0.0 {
-        "  up_axis: +z        # the synthetic captures stand on +z; glb and bvh turn it to +Y\n"
-    } else {
-        ""
+    // A tilted world says nothing of its up: the tool finds it. The tripod hangs in the air,
+    // so nothing of it shows the floor: its height is given.
+    let up = match (opts.world_tilt_deg == 0.0, opts.scene) {
+        (false, _) => "",
+        (true, SceneKind::Tripod) => {
+            "world:\n  up: +z              # the synthetic captures stand on +z; the exports turn it to +Y\n  \
+             floor: 0            # the tripod hangs in the air: the floor is given, not found\n"
+        }
+        (true, _) => {
+            "world:\n  up: +z              # the synthetic captures stand on +z; the exports turn it to +Y\n"
+        }
     };
     format!(
-        "# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
-         export:\n{up}  frame_rate: {}        # the motion's key frames at {key_rate} per second\n",
+        "{up}# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
+         export:\n  frame_rate: {}        # the motion's key frames at {key_rate} per second\n",
         (rate * 100.0).round() / 100.0
     )
 }
@@ -168,7 +174,7 @@ pub struct SynthOptions {
     pub pose: Option<humanoid::HeldPose>,
     /// Degrees by which the written world is tilted (`--world-tilt`): the calibration and
     /// the truth are turned and moved together, nothing in the files says where up is
-    /// (0: the world stands on +z, as pipeline.yaml's export.up_axis says).
+    /// (0: the world stands on +z, as pipeline.yaml's world.up says).
     pub world_tilt_deg: f64,
 }
 

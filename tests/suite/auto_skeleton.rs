@@ -133,6 +133,12 @@ fn tracking_from_the_automatic_skeleton_stays_within_two_and_a_half_centimetres(
     assert!(ok, "{err}");
     let errors = output_joint_errors_cm(d, "humanoid");
     eprintln!("from the automatic skeleton, mean joint error per frame (cm): {errors:.2?}");
+    // The exports' floor, found as the posed model's lowest point, lies within 2 cm of the
+    // true floor (z = 0) and is put at Y = 0.
+    let path = d.join("output/export/world.yaml");
+    let placed: hullpose::geometry::axes::ExportFrame =
+        hullpose::yaml::from_str(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
+    assert!(placed.floor.abs() <= 0.02, "floor {:.3} m", placed.floor);
     assert_eq!(errors.len(), 9);
     assert!(errors.iter().all(|&e| e <= 2.5), "{errors:.2?}");
 }

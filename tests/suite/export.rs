@@ -12,7 +12,7 @@
 use crate::common;
 
 use common::*;
-use hullpose::geometry::axes::{to_y_up, UpAxis};
+use hullpose::geometry::axes::ExportFrame;
 use hullpose::skeleton::Skeleton;
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde_json::Value;
@@ -34,10 +34,7 @@ fn sample_run() -> &'static Path {
                 "export:\n",
                 "export:\n  formats: [glb, bvh, ply, obj, overlay, trc, c3d]\n",
             );
-        assert!(
-            yaml.contains("up_axis: +z"),
-            "the sample declares its up axis"
-        );
+        assert!(yaml.contains("up: +z"), "the sample declares its up axis");
         std::fs::write(dir.path().join("pipeline.yaml"), yaml).unwrap();
         let (ok, out, err) = run_cli(&["run", "pipeline.yaml"], dir.path());
         assert!(ok, "{out}\n{err}");
@@ -50,6 +47,19 @@ fn sample_run() -> &'static Path {
 /// Whether external checks are required (CI) rather than optional.
 fn required() -> bool {
     std::env::var("HULLPOSE_EXTERNAL_CHECKS").is_ok_and(|v| v == "1")
+}
+
+/// How the sample's exports place the world (output/export/world.yaml): +z turned to +Y,
+/// the floor (the lowest point of the posed model) at Y = 0.
+fn export_frame(dir: &Path) -> ExportFrame {
+    let path = dir.join("output/export/world.yaml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    hullpose::yaml::from_str(&path, &text).unwrap()
+}
+
+/// The sample's floor, as `--floor` for the checkers.
+fn floor_arg(dir: &Path) -> String {
+    format!("{}", export_frame(dir).floor)
 }
 
 fn repo_tools() -> PathBuf {
@@ -135,7 +145,10 @@ fn glb_animation_reproduces_the_joints() {
     let (doc, bin) = read_glb(&dir.join("output/export/tripod.glb"));
     let skeleton = Skeleton::read(&dir.join("data/tripod/skeleton.yaml")).unwrap();
     let joints = hullpose::joints::read(&dir.join("output/joints.csv")).unwrap();
-    let c = to_y_up(Some(UpAxis::PlusZ));
+    let placed = export_frame(dir);
+    // The sample stands on +z with its floor (given: the tripod hangs in the air) at z = 0.
+    assert_eq!(placed.floor, 0.0);
+    assert!((placed.rotation.inverse() * Vector3::y() - Vector3::z()).norm() < 1e-9);
     let n = skeleton.bones.len();
     // Per node: rest translation, and per key the animated translation / rotation.
     let nodes = doc["nodes"].as_array().unwrap();
@@ -193,10 +206,10 @@ fn glb_animation_reproduces_the_joints() {
                 .find(|j| j.frame == frame && j.bone == bone.name)
                 .unwrap();
             let head = world[b].1;
-            let tail = world[b].0 * (c * (bone.tail - bone.head)) + head;
+            let tail = world[b].0 * placed.vector(&(bone.tail - bone.head)) + head;
             worst = worst
-                .max((head - c * row.head).norm())
-                .max((tail - c * row.tail).norm());
+                .max((head - placed.point(&row.head)).norm())
+                .max((tail - placed.point(&row.tail)).norm());
         }
     }
     assert!(worst < 1e-4, "glb joints vs joints.csv: {worst} m");
@@ -216,6 +229,8 @@ fn bvh_read_by_bvhio_matches_the_joints() {
             joints.to_str().unwrap(),
             "--up",
             "+z",
+            "--floor",
+            &floor_arg(dir),
             "--tolerance",
             "0.001",
         ],
@@ -245,6 +260,7 @@ fn trc_read_by_opensim_and_c3d_read_by_ezc3d_match_the_joints() {
     let dir = sample_run();
     let joints = dir.join("output/joints.csv");
     let script = repo_tools().join("check_markers.py");
+    let floor = floor_arg(dir);
     for (file, reader) in [("tripod.trc", "opensim"), ("tripod.c3d", "ezc3d")] {
         let path = dir.join("output/export").join(file);
         let check = |up: &str| {
@@ -256,6 +272,8 @@ fn trc_read_by_opensim_and_c3d_read_by_ezc3d_match_the_joints() {
                     joints.to_str().unwrap(),
                     "--up",
                     up,
+                    "--floor",
+                    &floor,
                     "--tolerance",
                     "0.0001",
                 ],

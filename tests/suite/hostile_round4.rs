@@ -340,7 +340,8 @@ fn marker_names_are_unique_in_trc_and_c3d() {
         ],
     };
     let poses = vec![(0u32, hullpose::skeleton::Pose::rest(skeleton.bones.len()))];
-    let trc = hullpose::export::markers::to_trc("x.trc", &skeleton, &poses, 25.0, None);
+    let identity = hullpose::geometry::axes::ExportFrame::identity();
+    let trc = hullpose::export::markers::to_trc("x.trc", &skeleton, &poses, 25.0, &identity);
     let names: Vec<&str> = trc.lines().nth(3).unwrap().split('\t').skip(2).collect();
     let names: Vec<&str> = names.into_iter().filter(|n| !n.is_empty()).collect();
     let set: std::collections::HashSet<&&str> = names.iter().collect();

@@ -182,6 +182,8 @@ const CHANGED: &[(&str, &str)] = &[
     ("export.frame_rate", "30"),
     ("export.overlay_cameras", "[cam00]"),
     ("export.up_axis", "+z"),
+    ("world.up", "[0.1, 0.2, 0.9]"),
+    ("world.floor", "0.05"),
 ];
 
 /// The words a row uses for a parameter no stage reads.

@@ -127,7 +127,10 @@ fn a_tilted_world_keeps_its_images_and_states_its_up_only_in_the_truth() {
         std::fs::read(tilted.join(frame)).unwrap()
     );
     let yaml = std::fs::read_to_string(tilted.join("pipeline.yaml")).unwrap();
-    assert!(!yaml.contains("up_axis"), "{yaml}");
+    assert!(
+        !yaml.contains("up_axis") && !yaml.contains("world:"),
+        "{yaml}"
+    );
     let truth: hullpose::synth::world::WorldTruth =
         hullpose::yaml::read(&tilted.join("data/humanoid/ground_truth/world.yaml")).unwrap();
     let up = Vector3::from(truth.up);
