@@ -52,14 +52,16 @@ pub fn triangulate_frame(cams: &[Camera], frame: &PersonFrame) -> Vec<Option<Poi
 }
 
 /// One view's judgement of a proposed pair of points: whether it agrees (within
-/// [`MAX_REPROJECTION_PX`]), whether its labels are swapped, and its reprojection error (px).
-type Verdict = (bool, bool, f64);
+/// [`MAX_REPROJECTION_PX`]), whether its labels are swapped, its reprojection error with the
+/// nearer labelling and with the other (px).
+type Verdict = (bool, bool, f64, f64);
 
 /// The views whose labels of the pair (`left`, `right`) are the wrong way round. Every two
 /// views that see both, with the second's labels as they are and swapped, propose the pair's
 /// two points; each view takes the labelling that reprojects nearer to them, and agrees when
 /// that is within [`MAX_REPROJECTION_PX`] for both. The proposal most views agree with (then
-/// the nearest) wins, and the labelling most of them give is taken as right.
+/// the nearest; three at least) wins, the labelling most of them give is taken as right, and
+/// a view is swapped where its own labels lie beyond [`MAX_REPROJECTION_PX`].
 fn swapped_views(
     cams: &[Camera],
     views: &[Option<Vec<[f64; 3]>>],
@@ -89,9 +91,15 @@ fn swapped_views(
                         let straight = (pa - ql).norm().max((pb - qr).norm());
                         let swapped = (pa - qr).norm().max((pb - ql).norm());
                         let error = straight.min(swapped);
-                        (error <= MAX_REPROJECTION_PX, swapped < straight, error)
+                        let other = straight.max(swapped);
+                        (
+                            error <= MAX_REPROJECTION_PX,
+                            swapped < straight,
+                            error,
+                            other,
+                        )
                     }
-                    _ => (false, false, f64::INFINITY),
+                    _ => (false, false, f64::INFINITY, f64::INFINITY),
                 },
             )
             .collect()
@@ -122,21 +130,24 @@ fn swapped_views(
             }
         }
     }
-    let Some((_, _, verdict)) = best else {
+    // Three views at least must agree, or there is no telling which labels are wrong.
+    let Some((_, _, verdict)) = best.filter(|b| b.0 >= 3) else {
         return Vec::new();
     };
-    // Most agreeing views keep their labels: the others are the swapped ones.
-    let agreeing: Vec<(usize, bool)> = seen
+    // Most agreeing views keep their labels: the others are the swapped ones, where their
+    // own labels are clearly wrong (beyond MAX_REPROJECTION_PX; near-overlapping pairs,
+    // where either labelling fits, stay as they are).
+    let agreeing: Vec<(usize, bool, f64)> = seen
         .iter()
         .zip(&verdict)
         .filter(|(_, v)| v.0)
-        .map(|(s, v)| (s.0, v.1))
+        .map(|(s, v)| (s.0, v.1, v.3))
         .collect();
     let flipped = agreeing.iter().filter(|a| a.1).count();
     let majority_flipped = 2 * flipped > agreeing.len();
     agreeing
         .into_iter()
-        .filter(|a| a.1 != majority_flipped)
+        .filter(|a| a.1 != majority_flipped && a.2 > MAX_REPROJECTION_PX)
         .map(|a| a.0)
         .collect()
 }
@@ -398,10 +409,14 @@ mod tests {
                 Vector3::new(0.25 * a.cos(), 0.2 * a.sin(), 0.1 + 0.05 * l as f64)
             })
             .collect();
-        let mut frame = frame_of(&cams, &truth);
         let names = crate::person::LANDMARK_NAMES;
         let at = |n: &str| names.iter().position(|m| *m == n).unwrap();
         let (knee_l, knee_r) = (at("left_knee"), at("right_knee"));
+        // The knees a body's width apart.
+        let mut truth = truth;
+        truth[knee_l] = Vector3::new(0.15, 0.0, 0.5);
+        truth[knee_r] = Vector3::new(-0.15, 0.0, 0.5);
+        let mut frame = frame_of(&cams, &truth);
         // Two of six views take the left knee for the right (dropping them would leave four).
         for c in [1, 4] {
             frame.views[c].landmarks.swap(knee_l, knee_r);

@@ -51,6 +51,10 @@ pub const FOOT_MARGIN: f64 = 0.02;
 /// Refusal: left and right limbs whose lengths differ by more than this share.
 pub const LIMB_ASYMMETRY: f64 = 0.2;
 
+/// Refusal: a limb shorter than this share of the length the trunk calls for (the
+/// template's limb scaled as the trunk came out).
+pub const LIMB_SHORTEST: f64 = 0.6;
+
 /// Weights of the refinement's terms (step 4 of the module's notes): bone lengths within
 /// their chain, each chain's length against the placement's scale, heads apart from their
 /// parent's tail, and the end bones' reach.
@@ -1267,6 +1271,31 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
             })
             .sum()
     };
+    // Every limb about as long as the trunk says (the template's proportions): a limb laid
+    // short, folded into its own root, has not been followed.
+    let template_length = |bones: &mut dyn Iterator<Item = usize>| -> f64 {
+        bones.map(|b| template.bones[b].length()).sum()
+    };
+    let trunk: Vec<usize> = (0..template.bones.len())
+        .filter(|b| !in_limb.contains(b))
+        .collect();
+    let trunk_scale = limb_length(&trunk) / template_length(&mut trunk.iter().copied()).max(1e-9);
+    for limb in &limbs {
+        let expected = trunk_scale * template_length(&mut limb.iter().copied());
+        let got = limb_length(limb);
+        if !trunk.is_empty() && got < LIMB_SHORTEST * expected {
+            return Err(format!(
+                "the limb '{}' came out {:.0} cm long where the trunk calls for about {:.0}: \
+                 it could not be followed (a hand touching the body, as hands on the hips, \
+                 closes a loop the template cannot follow); choose a frame where the arms and \
+                 legs stand clear of the torso with --frame",
+                template.bones[limb[0]].name,
+                100.0 * got,
+                100.0 * expected
+            )
+            .into());
+        }
+    }
     for limb in &limbs {
         let name = &template.bones[limb[0]].name;
         let Some(other) = super::sides::other_side(name).and_then(|n| template.bone_index(&n))
