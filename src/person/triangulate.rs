@@ -69,18 +69,10 @@ fn swapped_views(
     right: usize,
 ) -> Vec<usize> {
     // (camera, left pixel, right pixel) where both are seen.
-    let seen: Vec<(usize, Vector2<f64>, Vector2<f64>)> = views
-        .iter()
-        .enumerate()
-        .filter_map(|(c, v)| {
-            let (a, b) = (v.as_ref()?[left], v.as_ref()?[right]);
-            let (pa, pb) = (Vector2::new(a[0], a[1]), Vector2::new(b[0], b[1]));
-            (a[2] >= MIN_VISIBILITY
-                && b[2] >= MIN_VISIBILITY
-                && cams[c].in_image(&pa)
-                && cams[c].in_image(&pb))
-            .then_some((c, pa, pb))
-        })
+    let rights = observations(cams, views, right);
+    let seen: Vec<(usize, Vector2<f64>, Vector2<f64>)> = observations(cams, views, left)
+        .into_iter()
+        .filter_map(|(c, pa, _)| rights.iter().find(|o| o.0 == c).map(|o| (c, pa, o.1)))
         .collect();
     // For proposed points (l, r): each view's verdict.
     let judge = |l: &Vector3<f64>, r: &Vector3<f64>| -> Vec<Verdict> {

@@ -59,16 +59,13 @@ pub fn write(job: &Job) -> Result<Written> {
     let fit_csv = output.join("fit.csv");
     let health_rows = read_csv(&fit_csv)?;
     let cache = &job.cache;
-    let model = crate::artifacts::body_model::read(cache)?;
     let cameras = &job.sequence.cameras;
-    let coarse = CoarseModel::new(&model.mesh, MODEL_CELL);
     let frames = job.frames.clone();
     let ctx = job.context();
+    let (model, poses) = crate::export::load_motion(&ctx, &frames)?;
+    let coarse = CoarseModel::new(&model.mesh, MODEL_CELL);
     // The exports' frame: the world's up as +Y, its floor at Y = 0.
-    let (frame, _) = {
-        let (_, poses) = crate::export::load_motion(&ctx, &frames)?;
-        crate::export::export_frame(&ctx, &model, &poses)
-    };
+    let (frame, _) = crate::export::export_frame(&ctx, &model, &poses);
     let up = |v: &Vector3<f64>| frame.point(v);
     let lift = Vector3::y() * frame.floor;
 
@@ -77,8 +74,12 @@ pub fn write(job: &Job) -> Result<Written> {
     let per_frame: Vec<(Vec<f64>, Vec<f64>)> = frames
         .par_iter()
         .map(|&f| {
-            let pose = crate::artifacts::fitted::read_pose(cache, &model.skeleton, f)?;
-            let bones = PosedBones::new(&model.skeleton, &pose);
+            let pose = &poses
+                .iter()
+                .find(|(g, _)| *g == f)
+                .expect("a pose for every frame")
+                .1;
+            let bones = PosedBones::new(&model.skeleton, pose);
             let mut m = Vec::with_capacity(12 * bones.rotations.len());
             for b in 0..bones.rotations.len() {
                 // World x -> R x + t becomes, in the export frame y = C x - f Y,
@@ -94,7 +95,7 @@ pub fn write(job: &Job) -> Result<Written> {
             let masks = crate::artifacts::silhouettes::read(cache, f, cameras)?;
             // Measured as the fit's health measures it (fit.csv's IoU).
             let posed = crate::fit::surface_layer::follow(
-                &coarse.posed(&model.pose(&pose)),
+                &coarse.posed(&model.pose(pose)),
                 &crate::stages::fit::cached_observation(&ctx, f)?.vertices,
                 job.config.fit.health.surface_reach,
             );

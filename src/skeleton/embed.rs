@@ -338,7 +338,8 @@ pub fn embed_from(
     }
     // The surface's extremities, seen from the torso of the template's own placement (the
     // guess's where that failed).
-    let tips = limb_extremities(&interior, template, &starts[starts.len() - 1].0);
+    let own = &starts.last().expect("a start, or returned above").0;
+    let tips = limb_extremities(&interior, template, own);
     let finish = |joints: Joints, scale: f64| -> Result<(Joints, f64, Unheld), Refusal> {
         let refined = descend_joints(&interior, template, &tpl, joints, scale, &weights);
         check(&interior, template, &refined)?;
@@ -1273,15 +1274,14 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
     };
     // Every limb about as long as the trunk says (the template's proportions): a limb laid
     // short, folded into its own root, has not been followed.
-    let template_length = |bones: &mut dyn Iterator<Item = usize>| -> f64 {
-        bones.map(|b| template.bones[b].length()).sum()
-    };
+    let template_length =
+        |bones: &[usize]| -> f64 { bones.iter().map(|&b| template.bones[b].length()).sum() };
     let trunk: Vec<usize> = (0..template.bones.len())
         .filter(|b| !in_limb.contains(b))
         .collect();
-    let trunk_scale = limb_length(&trunk) / template_length(&mut trunk.iter().copied()).max(1e-9);
+    let trunk_scale = limb_length(&trunk) / template_length(&trunk).max(1e-9);
     for limb in &limbs {
-        let expected = trunk_scale * template_length(&mut limb.iter().copied());
+        let expected = trunk_scale * template_length(limb);
         let got = limb_length(limb);
         if !trunk.is_empty() && got < LIMB_SHORTEST * expected {
             return Err(format!(

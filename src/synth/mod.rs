@@ -37,15 +37,18 @@ fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
     };
     // A tilted world says nothing of its up: the tool finds it. The tripod hangs in the air,
     // so nothing of it shows the floor: its height is given.
-    let up = match (opts.world_tilt_deg == 0.0, opts.scene) {
-        (false, _) => "",
-        (true, SceneKind::Tripod) => {
-            "world:\n  up: +z              # the synthetic captures stand on +z; the exports turn it to +Y\n  \
-             floor: 0            # the tripod hangs in the air: the floor is given, not found\n"
+    let floor = match opts.scene {
+        SceneKind::Tripod => {
+            "  floor: 0            # the tripod hangs in the air: the floor is given, not found\n"
         }
-        (true, _) => {
-            "world:\n  up: +z              # the synthetic captures stand on +z; the exports turn it to +Y\n"
-        }
+        SceneKind::Humanoid => "",
+    };
+    let up = if opts.world_tilt_deg == 0.0 {
+        format!(
+            "world:\n  up: +z              # the synthetic captures stand on +z; the exports turn it to +Y\n{floor}"
+        )
+    } else {
+        String::new()
     };
     format!(
         "{up}# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
@@ -303,11 +306,14 @@ impl Subject {
             .collect();
         let materials = (look == Look::Person).then(|| person_materials(body, &labels));
         // The head's centre and radius at rest, where the face is drawn.
-        let head = body.skeleton.bone_index("head").map(|b| {
-            let bone = &body.skeleton.bones[b];
-            let (r0, r1) = body.radii[b];
-            ((bone.head + bone.tail) / 2.0, r0.max(r1).max(1e-3))
-        });
+        let head = (look == Look::Person)
+            .then(|| body.skeleton.bone_index("head"))
+            .flatten()
+            .map(|b| {
+                let bone = &body.skeleton.bones[b];
+                let (r0, r1) = body.radii[b];
+                ((bone.head + bone.tail) / 2.0, r0.max(r1).max(1e-3))
+            });
         Subject {
             rest,
             weights,
