@@ -360,7 +360,9 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "foreground masks: given masks, or background subtraction",
         inputs: &[],
-        format_version: 1,
+        // 2: the person model's keypoints put right where a view swaps a left/right pair
+        // (they bound the consistency carving).
+        format_version: 2,
         sources: silhouette::sources,
         compute: Compute::Frame(&silhouette::STAGE),
         finish: Some(silhouette::finish),
@@ -370,7 +372,8 @@ pub const STAGES: &[StageDef] = &[
         scope: Scope::PerFrame,
         about: "conservative voxel carving and the hull's watertight mesh",
         inputs: &["silhouette"],
-        format_version: 5,
+        // 6: the keypoints' carving box from the swap-corrected triangulation.
+        format_version: 6,
         sources: visual_hull::sources,
         compute: Compute::Frame(&visual_hull::STAGE),
         finish: None,
