@@ -76,6 +76,8 @@ struct PipelineFile {
     sync: SyncParams,
     #[serde(default)]
     world: WorldParams,
+    #[serde(default)]
+    surface: crate::tracked_surface::SurfaceParams,
 }
 
 /// Facts of the capture's world frame (pipeline.yaml key `world`).
@@ -154,6 +156,10 @@ pub fn default_values() -> Result<Vec<(String, serde_json::Value)>> {
         ("export", serde_json::to_value(ExportParams::default())),
         ("sync", serde_json::to_value(SyncParams::default())),
         ("world", serde_json::to_value(WorldParams::default())),
+        (
+            "surface",
+            serde_json::to_value(crate::tracked_surface::SurfaceParams::default()),
+        ),
     ];
     let mut out = Vec::new();
     for (name, value) in sections {
@@ -205,6 +211,8 @@ pub struct Config {
     pub sync: SyncParams,
     /// The world's up and floor.
     pub world: WorldParams,
+    /// Stage 7 parameters: the tracked surface.
+    pub surface: crate::tracked_surface::SurfaceParams,
 }
 
 impl Config {
@@ -248,6 +256,7 @@ impl Config {
             export: file.export,
             sync: file.sync,
             world: file.world,
+            surface: file.surface,
         };
         crate::recon::silhouette::validate(&config.silhouette)
             .map_err(|m| Error::invalid(path, m))?;
@@ -257,6 +266,7 @@ impl Config {
         crate::fit::validate(&config.fit).map_err(|m| Error::invalid(path, m))?;
         validate_export(&config.export).map_err(|m| Error::invalid(path, m))?;
         validate_world(&config.world, &config.export).map_err(|m| Error::invalid(path, m))?;
+        crate::tracked_surface::validate(&config.surface).map_err(|m| Error::invalid(path, m))?;
         if let Some(mesh) = config.model.mesh.as_ref().filter(|m| !m.is_file()) {
             return Err(Error::invalid(
                 path,

@@ -38,6 +38,7 @@ pub mod slurm;
 pub mod stages;
 pub mod synth;
 pub mod text;
+pub mod tracked_surface;
 pub mod video;
 pub mod yaml;
 

@@ -59,9 +59,11 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         body: u64,
         /// The humanoid wears a dress: a skirt from the waist to above the knees that fuses
-        /// the thighs into one volume and swings with the legs.
-        #[arg(long)]
-        dress: bool,
+        /// the thighs into one volume and swings with the legs (`--dress` or `--dress
+        /// fitted`); `--dress loose`: its hem also swings after the body as a damped
+        /// pendulum, a shape no skinning of the pose gives.
+        #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "fitted")]
+        dress: Option<hullpose::synth::Dress>,
         /// What the humanoid wears: `costume` (a saturated noise pattern everywhere but
         /// plain trousers) or `person` (skin, hair, a red shirt, trousers, white shoes: a
         /// look a person model recognizes).

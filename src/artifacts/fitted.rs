@@ -99,6 +99,11 @@ pub fn read_state(cache: &Cache, skeleton: &Skeleton, frame: u32) -> Result<FitS
     read(&path, frame, skeleton.bones.len())
 }
 
+/// Reads a cached frame's posed model (world metres).
+pub fn read_mesh(cache: &Cache, frame: u32) -> Result<TriMesh> {
+    crate::geometry::ply::read_ply(&cache.stage_dir(STAGE).join(&files(frame)[3]))
+}
+
 /// Reads a cached frame's pose.
 pub fn read_pose(cache: &Cache, skeleton: &Skeleton, frame: u32) -> Result<Pose> {
     Ok(read_state(cache, skeleton, frame)?.pose)

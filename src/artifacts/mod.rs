@@ -10,7 +10,8 @@
 //! | [`reconstruction`] (refined) | `graphcut` | `NNNNNN.ply`, `NNNNNN.grid` |
 //! | [`observation`] | `reliability` | `NNNNNN.ply`, `NNNNNN.obs` |
 //! | [`body_model`] | `model` | `model.hpm`, `model.ply` (reference frame) |
-//! | fitted frame ([`crate::stages::fit`], [`crate::stages::fit_state`]) | `fit` | see there |
+//! | [`tracked_surface`] | `surface` | `NNNNNN.ply`, `NNNNNN.track.yaml` |
+//! | fitted frame ([`crate::stages::fit`], [`fitted`]) | `fit` | see there |
 
 use crate::error::Result;
 use std::path::Path;
@@ -22,6 +23,7 @@ pub mod observation;
 pub mod person;
 pub mod reconstruction;
 pub mod silhouettes;
+pub mod tracked_surface;
 
 /// A frame's computed artifact, as a stage hands it to the runner: the runner alone writes
 /// it into the stage's folder and records it in the cache.

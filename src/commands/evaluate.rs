@@ -9,6 +9,7 @@ use crate::runner::Job;
 pub fn evaluate(job: &Job) -> Result<()> {
     evaluate_pose(job)?;
     evaluate_health(job)?;
+    evaluate_tracked_silhouettes(job)?;
     if !job
         .frames
         .iter()
@@ -35,6 +36,14 @@ pub fn evaluate(job: &Job) -> Result<()> {
         .join("reconstruction.csv");
     crate::fsutil::write_atomic(&csv, crate::eval::reconstruction_csv(&rows).as_bytes())?;
     println!("written to {}", csv.display());
+    let tracked = crate::eval::tracked::rows(job)?;
+    if !tracked.is_empty() {
+        println!("\nthe posed model and the tracked surface against the truth");
+        print!("{}", crate::eval::tracked::table(&tracked));
+        let path = job.config.output.join("evaluation").join("surface.csv");
+        crate::fsutil::write_atomic(&path, crate::eval::tracked::to_csv(&tracked).as_bytes())?;
+        println!("written to {}", path.display());
+    }
     let rel = crate::eval::reliability::evaluate(job)?;
     if !rel.is_empty() {
         println!("\nreliability: ZNCC of true (<= 1 voxel) and false (> 2 voxels) vertices");
@@ -43,6 +52,28 @@ pub fn evaluate(job: &Job) -> Result<()> {
         crate::fsutil::write_atomic(&path, crate::eval::reliability::to_csv(&rel).as_bytes())?;
         println!("written to {}", path.display());
     }
+    Ok(())
+}
+
+/// The tracked surface's part of `evaluate` that needs no truth: its worst silhouette IoU
+/// per frame beside the graph cut's and the posed model's.
+fn evaluate_tracked_silhouettes(job: &Job) -> Result<()> {
+    let rows = crate::eval::tracked::silhouette_rows(job)?;
+    if rows.is_empty() {
+        return Ok(());
+    }
+    println!("the tracked surface against the silhouettes (full resolution)");
+    print!("{}", crate::eval::tracked::silhouette_table(&rows));
+    let path = job
+        .config
+        .output
+        .join("evaluation")
+        .join("surface_silhouettes.csv");
+    crate::fsutil::write_atomic(
+        &path,
+        crate::eval::tracked::silhouette_csv(&rows).as_bytes(),
+    )?;
+    println!("written to {}\n", path.display());
     Ok(())
 }
 

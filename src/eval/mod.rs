@@ -27,6 +27,7 @@ pub mod health_table;
 pub mod pose;
 pub mod pose_search;
 pub mod reliability;
+pub mod tracked;
 
 /// Points on `mesh`'s surface about `spacing` metres apart (deterministic).
 pub fn sample_surface(mesh: &TriMesh, spacing: f64) -> Vec<Vector3<f64>> {
@@ -86,12 +87,12 @@ pub struct ReconScore {
 }
 
 /// Spacing of the surface samples both surfaces are measured with, metres.
-const SAMPLE_SPACING: f64 = 0.002;
+pub(crate) const SAMPLE_SPACING: f64 = 0.002;
 
 /// The true surface sampled every 2 mm with its outward normals, indexed for
 /// nearest-point queries.
 pub struct TruthSamples {
-    points: Vec<Vector3<f64>>,
+    pub points: Vec<Vector3<f64>>,
     index: NearestTree,
     normals: Vec<Vector3<f64>>,
 }
@@ -127,7 +128,7 @@ impl TruthSamples {
 }
 
 /// The value below which a share `q` of the sorted `values` lie (infinite for none).
-fn quantile(sorted: &[f64], q: f64) -> f64 {
+pub(crate) fn quantile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::INFINITY;
     }
@@ -248,7 +249,7 @@ pub fn reprojection_agreement(
 }
 
 /// Per-camera pixel tables (one undistortion per pixel: made once per evaluation).
-fn pixel_tables(job: &Job) -> Vec<crate::geometry::raster::PixelRays> {
+pub(crate) fn pixel_tables(job: &Job) -> Vec<crate::geometry::raster::PixelRays> {
     job.sequence
         .cameras
         .par_iter()
@@ -312,7 +313,7 @@ pub fn without_ground_truth(job: &Job) -> Result<(String, String)> {
 }
 
 /// Silhouette agreement per camera of `mesh` reprojected ([`SilhouetteAgreement`]).
-fn coverage_of(
+pub(crate) fn coverage_of(
     job: &Job,
     rays: &[crate::geometry::raster::PixelRays],
     mesh: &TriMesh,

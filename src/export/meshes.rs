@@ -2,7 +2,8 @@
 //!
 //! Per selected frame: `visual_hull/NNNNNN` and `graphcut/NNNNNN` (the surfaces, coloured
 //! from the input frames: per vertex the cos-weighted mean colour over the cameras that see
-//! it, facing and not hidden), and with a skeleton `fit/NNNNNN` (the posed model coloured by
+//! it, facing and not hidden), and with a skeleton `fit/NNNNNN` and, where the surface
+//! stage ran, `surface/NNNNNN` (the posed model and the tracked surface, coloured by
 //! part) plus `model` (the t0 body model). PLY carries normals, colours and a `quality` that
 //! MeshLab reads as its scalar: the number of cameras seeing the vertex (hull), rho_p
 //! (refined surface, with raw `zncc`, `rho_p` and `cameras` beside it when the reliability
@@ -217,6 +218,20 @@ impl<'a> MeshExport<'a> {
                 &self.part_colours,
                 vec![("quality", &self.parts)],
             )?;
+            let tracked = crate::artifacts::tracked_surface::STAGE;
+            if ctx.cache.manifest(tracked, frame).is_some() {
+                let surface = crate::artifacts::tracked_surface::read_mesh(ctx.cache, frame)?;
+                if surface.vertices.len() == posed.vertices.len() {
+                    files += write_one(
+                        formats,
+                        &dir.join(tracked).join(&stem),
+                        &surface,
+                        &surface.vertex_normals(),
+                        &self.part_colours,
+                        vec![("quality", &self.parts)],
+                    )?;
+                }
+            }
         }
         Ok(files)
     }

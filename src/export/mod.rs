@@ -6,7 +6,7 @@
 //!
 //! Layout under `<output>/export/`: `<sequence>.glb`, `<sequence>.bvh`, `<sequence>.trc`,
 //! `<sequence>.c3d` and `world.yaml` (how they place the world: [`export_frame`]),
-//! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit) and
+//! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit, surface) and
 //! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `contact_sheets/NNNNNN.png`.
 
 pub mod bvh;

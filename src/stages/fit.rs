@@ -107,7 +107,7 @@ pub fn cached_observation(ctx: &Context, frame: u32) -> Result<Observation> {
     )?))
 }
 
-fn as_observation(o: crate::recon::reliability::Observed) -> Observation {
+pub(crate) fn as_observation(o: crate::recon::reliability::Observed) -> Observation {
     Observation {
         vertices: o.vertices.iter().map(|v| v.cast()).collect(),
         normals: o.normals.iter().map(|v| v.cast()).collect(),

@@ -17,6 +17,7 @@ pub mod graphcut;
 pub mod model;
 pub mod reliability;
 pub mod silhouette;
+pub mod surface;
 pub mod visual_hull;
 
 use crate::artifacts::reconstruction::{self, Surface};
@@ -182,6 +183,12 @@ impl Inputs<'_> {
     ) -> Result<crate::artifacts::fitted::FitState> {
         self.declared(crate::artifacts::fitted::STAGE)?;
         crate::artifacts::fitted::read_state(self.cache, skeleton, frame)
+    }
+
+    /// A tracked frame's mesh (the surface stage reads its previous frame's).
+    pub fn tracked_surface(&self, frame: u32) -> Result<TriMesh> {
+        self.declared(crate::artifacts::tracked_surface::STAGE)?;
+        crate::artifacts::tracked_surface::read_mesh(self.cache, frame)
     }
 
     /// The frame's images as grey: decoded, or kept from an earlier stage of the frame
@@ -417,6 +424,16 @@ pub const STAGES: &[StageDef] = &[
         sources: fit::sources,
         compute: Compute::Tracked(&fit::STAGE),
         finish: Some(fit::finish),
+    },
+    StageDef {
+        name: crate::artifacts::tracked_surface::STAGE,
+        scope: Scope::Tracked,
+        about: "the posed model deformed to each frame's observed surface and silhouettes",
+        inputs: &["silhouette", "reliability", "model", "fit"],
+        format_version: crate::artifacts::tracked_surface::FORMAT,
+        sources: surface::sources,
+        compute: Compute::Tracked(&surface::STAGE),
+        finish: None,
     },
 ];
 

@@ -132,6 +132,21 @@ impl Body {
         }
     }
 
+    /// How far down the skirt a rest point lies where the skirt, not the flesh, is the
+    /// surface: 0 at the waist to 1 at the hem; 0 on the flesh and without a skirt.
+    pub fn skirt_depth(&self, p: &Vector3<f64>) -> f64 {
+        let Some(skirt) = &self.skirt else {
+            return 0.0;
+        };
+        let flesh = (0..self.skeleton.bones.len())
+            .map(|b| self.cone_distance(b, p))
+            .fold(f64::INFINITY, f64::min);
+        if skirt.distance(p) >= flesh - 1e-3 {
+            return 0.0;
+        }
+        ((skirt.top.z - p.z) / skirt.length).clamp(0.0, 1.0)
+    }
+
     /// The rest surface: the zero level of [`Body::rest_distance`] meshed at `spacing`.
     pub fn rest_mesh(&self, spacing: f64) -> TriMesh {
         let mut lo = Vector3::repeat(f64::INFINITY);

@@ -630,7 +630,7 @@ pub fn scene(opts: &super::SynthOptions, frames: usize) -> Scene {
         opts.motion,
     );
     let mut body = body(opts.proportions);
-    if opts.dress {
+    if opts.dress.is_some() {
         body.skirt = Some(skirt(&body));
     }
     let bone = |n: &str| body.skeleton.bone_index(n).expect("known bone");

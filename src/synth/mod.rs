@@ -6,6 +6,7 @@
 //! meshes, plus a ready-to-run pipeline.yaml.
 
 pub mod body;
+pub mod dress;
 pub mod humanoid;
 pub mod render;
 pub mod scene;
@@ -28,13 +29,20 @@ use std::time::Instant;
 /// The export settings of a synthetic capture's pipeline.yaml: its world stands on +z, and
 /// its `frame_rate` frames per second make the motion last as long as its key frames at
 /// their own rate, however many frames sample it (`frames` of the scene's key frames).
-fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
+/// The capture's frame rate, frames per second: the motion's key frames at their rate,
+/// resampled to `frames`.
+fn frame_rate(frames: usize, opts: &SynthOptions) -> f64 {
     let (key_frames, key_rate) = key_frames(opts);
-    let rate = if key_frames > 1 {
+    if key_frames > 1 {
         key_rate * (frames.max(2) - 1) as f64 / (key_frames - 1) as f64
     } else {
         key_rate
-    };
+    }
+}
+
+fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
+    let key_rate = key_frames(opts).1;
+    let rate = frame_rate(frames, opts);
     // A tilted world says nothing of its up: the tool finds it. The tripod hangs in the air,
     // so nothing of it shows the floor: its height is given.
     let floor = match opts.scene {
@@ -136,6 +144,16 @@ pub enum Motion {
     Walk,
 }
 
+/// The humanoid's dress (`pipeline synth --dress`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Dress {
+    /// A skirt skinned like the flesh: it swings with the legs ([`body::Skirt`]).
+    Fitted,
+    /// The same skirt with a hem that swings after the body as a damped pendulum
+    /// ([`dress`]): a shape the pose alone does not give.
+    Loose,
+}
+
 /// Which scene to make.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SceneKind {
@@ -169,8 +187,8 @@ pub struct SynthOptions {
     pub motion: Motion,
     /// The humanoid's proportions (`--body SEED`: [`humanoid::Proportions::from_seed`]).
     pub proportions: humanoid::Proportions,
-    /// Whether the humanoid wears a dress (`--dress`: [`body::Skirt`]).
-    pub dress: bool,
+    /// The humanoid's dress, if it wears one (`--dress`).
+    pub dress: Option<Dress>,
     /// What the humanoid wears (`--look`).
     pub look: Look,
     /// A pose the humanoid holds in every frame instead of a motion (`--pose`).
@@ -196,7 +214,7 @@ impl SynthOptions {
             first_frame: 0,
             motion: Motion::Default,
             proportions: Default::default(),
-            dress: false,
+            dress: None,
             look: Look::Costume,
             pose: None,
             world_tilt_deg: 0.0,
@@ -225,7 +243,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
     if opts.proportions != humanoid::Proportions::default() && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--body needs --scene humanoid".into()));
     }
-    if opts.dress && opts.scene != SceneKind::Humanoid {
+    if opts.dress.is_some() && opts.scene != SceneKind::Humanoid {
         return Err(Error::Usage("--dress needs --scene humanoid".into()));
     }
     if opts.look != Look::Costume && opts.scene != SceneKind::Humanoid {
@@ -376,11 +394,19 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     let stem = crate::dataset::frame_stem;
 
     // Posed surfaces and shadows, one per frame.
-    let posed: Vec<(TriMesh, Vec<nalgebra::Vector3<f64>>, ShadowMap)> = scene
-        .poses
-        .par_iter()
-        .map(|p| {
-            let mesh = scene.body.pose_mesh(&subject.rest, &subject.weights, p);
+    let mut meshes: Vec<TriMesh> = (scene.poses.par_iter())
+        .map(|p| scene.body.pose_mesh(&subject.rest, &subject.weights, p))
+        .collect();
+    if let (Some(Dress::Loose), Some(skirt)) = (opts.dress, &scene.body.skirt) {
+        let depth: Vec<f64> = (subject.rest.vertices.par_iter())
+            .map(|v| scene.body.skirt_depth(v))
+            .collect();
+        let rate = frame_rate(scene.poses.len(), opts);
+        dress::swing(&mut meshes, &depth, skirt.length, rate);
+    }
+    let posed: Vec<(TriMesh, Vec<nalgebra::Vector3<f64>>, ShadowMap)> = meshes
+        .into_par_iter()
+        .map(|mesh| {
             let normals = mesh.vertex_normals();
             let shadow = ShadowMap::new(&mesh);
             (mesh, normals, shadow)

@@ -156,7 +156,7 @@ fn a_dress_and_no_open_pose_at_the_start_are_embedded_and_tracked() {
     let mut options = SynthOptions::new(SceneKind::Humanoid, d);
     (options.cameras, options.width, options.height) = (8, 640, 480);
     options.motion = hullpose::synth::Motion::ArmsDown;
-    options.dress = true;
+    options.dress = Some(hullpose::synth::Dress::Fitted);
     hullpose::synth::generate(&options).unwrap();
     // Frames 0..15: arms down to frame 9, open at 13, towards the crossed forearms after.
     let yaml = std::fs::read_to_string(d.join("pipeline.yaml")).unwrap();

@@ -43,5 +43,6 @@ mod skeleton_refusals;
 mod stage_functions;
 mod synth_data;
 mod synth_scenes;
+mod tracked_surface;
 mod video;
 mod visual_hull;

@@ -184,6 +184,13 @@ const CHANGED: &[(&str, &str)] = &[
     ("export.up_axis", "+z"),
     ("world.up", "[0.1, 0.2, 0.9]"),
     ("world.floor", "0.05"),
+    ("surface.reach", "0.08"),
+    ("surface.shape", "2.0"),
+    ("surface.anchor", "0.05"),
+    ("surface.memory", "0.5"),
+    ("surface.silhouette", "2.0"),
+    ("surface.silhouette_tolerance", "2.0"),
+    ("surface.rounds", "4"),
 ];
 
 /// The words a row uses for a parameter no stage reads.
