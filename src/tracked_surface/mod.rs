@@ -74,7 +74,7 @@ impl Default for SurfaceParams {
     fn default() -> Self {
         SurfaceParams {
             reach: 0.05,
-            shape: 4.0,
+            shape: 1.0,
             anchor: 0.01,
             memory: 0.8,
             silhouette: 1.0,
