@@ -79,6 +79,13 @@ enum Command {
         /// nothing but ground_truth/world.yaml says where up is.
         #[arg(long, value_name = "DEG", default_value_t = 0.0)]
         world_tilt: f64,
+        /// With `--scene meshes`: the folder of the mesh sequence to film (OBJ or PLY, one
+        /// file per frame, a frame number in each name, one topology, metres).
+        #[arg(long, value_name = "DIR")]
+        meshes: Option<PathBuf>,
+        /// The mesh sequence's up axis (`+x` ... `-z`).
+        #[arg(long, value_name = "AXIS", default_value = "+y", value_parser = parse_axis)]
+        mesh_up: hullpose::geometry::axes::UpAxis,
     },
     /// Run the pipeline: compute what is stale, reuse what the cache holds.
     Run {
@@ -409,6 +416,10 @@ fn count<const MIN: usize, const MAX: usize>(s: &str) -> Result<usize, hullpose:
     Ok(n)
 }
 
+fn parse_axis(s: &str) -> Result<hullpose::geometry::axes::UpAxis, String> {
+    hullpose::geometry::axes::UpAxis::try_from(s.to_string()).map_err(|e| e.0)
+}
+
 fn parse_range(s: &str) -> Result<FrameRange, hullpose::error::Refusal> {
     FrameRange::parse(s)
 }
@@ -694,8 +705,12 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             look,
             pose,
             world_tilt,
+            meshes,
+            mesh_up,
         } => {
             let mut opts = SynthOptions::new(scene, out);
+            opts.meshes = meshes;
+            opts.mesh_up = mesh_up;
             opts.motion = motion;
             opts.dress = dress;
             opts.look = look;

@@ -10,6 +10,7 @@ pub mod dress;
 pub mod humanoid;
 pub mod render;
 pub mod scene;
+pub mod sequence;
 pub mod texture;
 pub mod tripod;
 pub mod world;
@@ -49,7 +50,7 @@ fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
         SceneKind::Tripod => {
             "  floor: 0            # the tripod hangs in the air: the floor is given, not found\n"
         }
-        SceneKind::Humanoid => "",
+        SceneKind::Humanoid | SceneKind::Meshes => "",
     };
     let up = if opts.world_tilt_deg == 0.0 {
         format!(
@@ -161,6 +162,9 @@ pub enum SceneKind {
     Tripod,
     /// A human figure moving through contact poses.
     Humanoid,
+    /// A given mesh sequence (`--meshes DIR`, [`sequence`]): a 4D scan or any
+    /// fixed-topology sequence, its surfaces kept as the truth.
+    Meshes,
 }
 
 /// Options of `pipeline synth`.
@@ -197,6 +201,10 @@ pub struct SynthOptions {
     /// the truth are turned and moved together, nothing in the files says where up is
     /// (0: the world stands on +z, as pipeline.yaml's world.up says).
     pub world_tilt_deg: f64,
+    /// The mesh sequence's folder (`--meshes`, scene `meshes`).
+    pub meshes: Option<PathBuf>,
+    /// The mesh sequence's up axis (`--mesh-up`).
+    pub mesh_up: crate::geometry::axes::UpAxis,
 }
 
 impl SynthOptions {
@@ -218,6 +226,8 @@ impl SynthOptions {
             look: Look::Costume,
             pose: None,
             world_tilt_deg: 0.0,
+            meshes: None,
+            mesh_up: crate::geometry::axes::UpAxis::PlusY,
         }
     }
 }
@@ -276,6 +286,11 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
             opts.seed,
         ),
         SceneKind::Humanoid => humanoid::scene(opts, opts.frames.unwrap_or(key_frames(opts).0)),
+        SceneKind::Meshes => {
+            return Err(Error::Usage(
+                "--scene meshes films a given sequence, not a body: see `generate`".into(),
+            ))
+        }
     })
 }
 
@@ -285,6 +300,7 @@ pub fn build_scene(opts: &SynthOptions) -> Result<Scene> {
 fn key_frames(opts: &SynthOptions) -> (usize, f64) {
     match (opts.scene, opts.motion) {
         (SceneKind::Tripod, _) => (tripod::KEY_FRAMES, 25.0),
+        (SceneKind::Meshes, _) => (1, 25.0),
         (SceneKind::Humanoid, _) if opts.pose.is_some() => (1, 8.0),
         (SceneKind::Humanoid, Motion::Dance) => (humanoid::DANCE_KEY_FRAMES, 25.0),
         (SceneKind::Humanoid, Motion::Default) => (humanoid::KEY_FRAMES, 8.0),
@@ -385,25 +401,19 @@ fn progress(len: u64, what: &str) -> ProgressBar {
     bar
 }
 
-/// Renders and writes the dataset. Every file is written atomically.
-pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
-    let start = Instant::now();
-    let scene = build_scene(opts)?;
-    let subject = Subject::new(&scene.body, opts.mesh_spacing, opts.look);
-    let seq_dir = opts.out.join("data").join(&scene.name);
+/// Renders `meshes` (one per frame, the subject's surface posed) through `cameras` into
+/// `seq_dir` (frames, true masks, backgrounds) and writes the true meshes turned by `tilt`
+/// (`ground_truth/meshes`); returns the true meshes with their normals, all frames.
+fn render_capture(
+    opts: &SynthOptions,
+    cameras: &[crate::camera::Camera],
+    subject: &Subject,
+    meshes: Vec<TriMesh>,
+    seq_dir: &std::path::Path,
+    tilt: &world::WorldTilt,
+) -> Result<Vec<(TriMesh, Vec<nalgebra::Vector3<f64>>)>> {
     let stem = crate::dataset::frame_stem;
-
-    // Posed surfaces and shadows, one per frame.
-    let mut meshes: Vec<TriMesh> = (scene.poses.par_iter())
-        .map(|p| scene.body.pose_mesh(&subject.rest, &subject.weights, p))
-        .collect();
-    if let (Some(Dress::Loose), Some(skirt)) = (opts.dress, &scene.body.skirt) {
-        let depth: Vec<f64> = (subject.rest.vertices.par_iter())
-            .map(|v| scene.body.skirt_depth(v))
-            .collect();
-        let rate = frame_rate(scene.poses.len(), opts);
-        dress::swing(&mut meshes, &depth, skirt.length, rate);
-    }
+    let meshes_len = meshes.len();
     let posed: Vec<(TriMesh, Vec<nalgebra::Vector3<f64>>, ShadowMap)> = meshes
         .into_par_iter()
         .map(|mesh| {
@@ -412,22 +422,21 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
             (mesh, normals, shadow)
         })
         .collect();
-    let views: Vec<CameraView> = scene
-        .cameras
+    let views: Vec<CameraView> = cameras
         .par_iter()
         .enumerate()
         .map(|(i, c)| CameraView::new(c, opts.seed, i as u64))
         .collect();
 
-    let nf = scene.poses.len();
-    let nc = scene.cameras.len();
+    let nf = meshes_len;
+    let nc = cameras.len();
     let first = opts.first_frame.min(nf);
     let bar = progress(((nf - first) * nc) as u64, "rendering");
     let jobs: Vec<(usize, usize)> = (first..nf)
         .flat_map(|f| (0..nc).map(move |c| (c, f)))
         .collect();
     jobs.par_iter().try_for_each(|&(c, f)| -> Result<()> {
-        let cam = &scene.cameras[c];
+        let cam = &cameras[c];
         let (mesh, normals, shadow) = &posed[f];
         let surface = Surface {
             mesh,
@@ -451,7 +460,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
     bar.finish_and_clear();
 
     views.par_iter().enumerate().try_for_each(|(c, view)| {
-        let cam = &scene.cameras[c];
+        let cam = &cameras[c];
         let img =
             render::render_background(view, cam.width, cam.height, opts.seed, 2_000_000 + c as u64);
         crate::imageio::write_rgb(
@@ -460,8 +469,7 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         )
     })?;
 
-    // The calibration and the truth in the written world (the rendered one, untilted).
-    let tilt = world::WorldTilt::new(opts.world_tilt_deg);
+    // The truth in the written world (the rendered one, untilted).
     let truth: Vec<(TriMesh, Vec<nalgebra::Vector3<f64>>)> = posed
         .par_iter()
         .map(|(mesh, normals, _)| {
@@ -484,6 +492,34 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
             };
             ply::write_ply(&path, mesh, &attrs, PlyFormat::BinaryLittleEndian)
         })?;
+    Ok(truth)
+}
+
+/// Renders and writes the dataset. Every file is written atomically.
+pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
+    let start = Instant::now();
+    if opts.scene == SceneKind::Meshes || opts.meshes.is_some() {
+        return generate_sequence(opts, start);
+    }
+    let scene = build_scene(opts)?;
+    let subject = Subject::new(&scene.body, opts.mesh_spacing, opts.look);
+    let seq_dir = opts.out.join("data").join(&scene.name);
+
+    // Posed surfaces and shadows, one per frame.
+    let mut meshes: Vec<TriMesh> = (scene.poses.par_iter())
+        .map(|p| scene.body.pose_mesh(&subject.rest, &subject.weights, p))
+        .collect();
+    if let (Some(Dress::Loose), Some(skirt)) = (opts.dress, &scene.body.skirt) {
+        let depth: Vec<f64> = (subject.rest.vertices.par_iter())
+            .map(|v| scene.body.skirt_depth(v))
+            .collect();
+        let rate = frame_rate(scene.poses.len(), opts);
+        dress::swing(&mut meshes, &depth, skirt.length, rate);
+    }
+    let tilt = world::WorldTilt::new(opts.world_tilt_deg);
+    let truth = render_capture(opts, &scene.cameras, &subject, meshes, &seq_dir, &tilt)?;
+    let (nf, nc) = (scene.poses.len(), scene.cameras.len());
+    let first = opts.first_frame.min(nf);
 
     let joints: Vec<Vec<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)>> = (scene.poses.iter())
         .map(|p| {
@@ -555,6 +591,111 @@ pub fn generate(opts: &SynthOptions) -> Result<SynthSummary> {
         cameras: nc,
         frames: nf - first,
         vertices: subject.rest.vertices.len(),
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// `generate` for a given mesh sequence ([`sequence`]): the rig around it, its frames,
+/// masks and plates rendered, its surfaces written as the truth, and a pipeline.yaml
+/// (without skeleton.yaml: `pipeline skeleton` makes one).
+fn generate_sequence(opts: &SynthOptions, start: Instant) -> Result<SynthSummary> {
+    let humanoid_only = opts.motion != Motion::Default
+        || opts.dress.is_some()
+        || opts.look != Look::Costume
+        || opts.pose.is_some()
+        || opts.proportions != humanoid::Proportions::default();
+    if humanoid_only {
+        return Err(Error::Usage(
+            "--motion, --dress, --look, --pose and --body are the humanoid's: leave them out \
+             with --meshes"
+                .into(),
+        ));
+    }
+    let (Some(dir), SceneKind::Meshes) = (&opts.meshes, opts.scene) else {
+        return Err(Error::Usage(
+            "a mesh sequence is filmed with --scene meshes --meshes DIR".into(),
+        ));
+    };
+    if opts.cameras < 2 || !(16..=8192).contains(&opts.width) || !(16..=8192).contains(&opts.height)
+    {
+        return Err(Error::Usage(
+            "--cameras must be at least 2, --width and --height between 16 and 8192".into(),
+        ));
+    }
+    if opts.frames == Some(0) {
+        return Err(Error::Usage("--frames must be at least 1".into()));
+    }
+    let meshes = sequence::read(dir, opts.mesh_up, opts.frames)?;
+    let name = dir
+        .file_name()
+        .and_then(|n| n.to_str())
+        .filter(|n| crate::camera::check_name(n).is_ok() && !n.starts_with('.'))
+        .unwrap_or("meshes")
+        .to_string();
+    // The rig's ring around the whole motion: aimed at the middle of its height, far
+    // enough that the tallest frame fits the image's height with 30 cm to spare.
+    let (lo, hi) = meshes
+        .iter()
+        .filter_map(|m| m.bounds())
+        .reduce(|(a, b), (c, d)| (a.inf(&c), b.sup(&d)))
+        .expect("the sequence has vertices");
+    let focal = 1100.0 * opts.width as f64 / 1024.0;
+    let half_view = (opts.height as f64 / 2.0 / focal).atan();
+    let reach = (lo.xy().norm()).max(hi.xy().norm());
+    let radius = ((hi.z - lo.z) / 2.0 + 0.3) / half_view.tan() + reach;
+    let cameras = scene::camera_ring(
+        &scene::RingSpec {
+            count: opts.cameras,
+            radius: radius.max(4.0),
+            heights: vec![1.2, 1.7, 2.4],
+            target: nalgebra::Vector3::new(0.0, 0.0, (lo.z + hi.z) / 2.0),
+            focal_1024: 1100.0,
+            width: opts.width,
+            height: opts.height,
+        },
+        opts.seed,
+    );
+    let n = meshes[0].vertices.len();
+    let subject = Subject {
+        rest: meshes[0].clone(),
+        weights: Vec::new(),
+        labels: Vec::new(),
+        plain: vec![0.0; n],
+        materials: None,
+        head: None,
+    };
+    let seq_dir = opts.out.join("data").join(&name);
+    let tilt = world::WorldTilt::new(opts.world_tilt_deg);
+    let nf = meshes.len();
+    let truth = render_capture(opts, &cameras, &subject, meshes, &seq_dir, &tilt)?;
+    let first = opts.first_frame.min(nf);
+    tilt.write_truth(&seq_dir.join("ground_truth").join("world.yaml"))?;
+    let cameras: Vec<crate::camera::Camera> = cameras.iter().map(|c| tilt.camera(c)).collect();
+    crate::camera::write_cameras(&opts.out.join("calib").join("cameras.yaml"), &cameras)?;
+    let pipeline_yaml = opts.out.join("pipeline.yaml");
+    let bounds = (truth.iter().skip(first))
+        .filter_map(|(mesh, _)| mesh.bounds())
+        .reduce(|(a, b), (c, d)| (a.inf(&c), b.sup(&d)));
+    let up = if opts.world_tilt_deg == 0.0 {
+        "world:\n  up: +z              # the sequence stands on +z here; the exports turn it to +Y\n"
+    } else {
+        ""
+    };
+    crate::fsutil::write_atomic(
+        &pipeline_yaml,
+        format!(
+            "{}{}{up}# the sequence's frame rate is not known here: set export.frame_rate\n",
+            crate::config::default_yaml("calib/cameras.yaml", &format!("data/{name}")),
+            box_yaml(&cameras, &seq_dir, first as u32, bounds)?,
+        )
+        .as_bytes(),
+    )?;
+    Ok(SynthSummary {
+        sequence_dir: seq_dir,
+        pipeline_yaml,
+        cameras: cameras.len(),
+        frames: nf - first,
+        vertices: n,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
