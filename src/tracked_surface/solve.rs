@@ -109,8 +109,19 @@ pub struct Solved {
     pub relative_residual: f64,
 }
 
+/// Entries per block of a dot product's partial sums.
+const DOT_BLOCK: usize = 4096;
+
+/// a · b, summed in fixed blocks and then in order: the same bits whatever the threads
+/// did (a parallel sum's order, and so its rounding, depends on how the work was split),
+/// so that a resumed run writes what a fresh one writes.
 fn dot(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
-    a.par_iter().zip(b).map(|(x, y)| x.dot(y)).sum()
+    let partial: Vec<f64> = a
+        .par_chunks(DOT_BLOCK)
+        .zip(b.par_chunks(DOT_BLOCK))
+        .map(|(x, y)| x.iter().zip(y).map(|(x, y)| x.dot(y)).sum::<f64>())
+        .collect();
+    partial.iter().sum()
 }
 
 impl System<'_> {

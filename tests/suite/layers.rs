@@ -23,6 +23,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("maxflow", 0),
     ("skeleton", 0),
     ("fit", 0),
+    ("tracked_surface", 0),
     ("recon", 0),
     ("person", 0),
     ("joints", 0),
