@@ -43,17 +43,16 @@ fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> 
     let tracker = Tracker::new(&model, settings.surface, settings.contact);
     let t0 = model.skeleton.reference_frame;
     let seq = inputs.sequence;
-    // The frames tracked in this run (earlier ones are read back from the cache).
-    let mut kept: std::collections::HashMap<u32, (crate::skeleton::Pose, Vec<Vector3<f64>>)> =
-        Default::default();
+    // The frame just tracked (an earlier one is read back from the cache).
+    let mut last: Option<(u32, crate::skeleton::Pose, Vec<Vector3<f64>>)> = None;
     for &frame in frames {
         let started = std::time::Instant::now();
         let pose = inputs.fitted_state(&model.skeleton, frame)?.pose;
         let previous = match seq.tracked_previous(frame, t0) {
             None => None,
-            Some(p) => Some(match kept.remove(&p) {
-                Some(k) => k,
-                None => (
+            Some(p) => Some(match last.take() {
+                Some((f, pose, vertices)) if f == p => (pose, vertices),
+                _ => (
                     inputs.fitted_state(&model.skeleton, p)?.pose,
                     inputs.tracked_surface(p)?.vertices,
                 ),
@@ -71,16 +70,12 @@ fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> 
             pose,
             vertices: vertices.as_slice(),
         });
-        let (mesh, stats) = tracker.frame(&pose, previous.as_ref(), &evidence);
-        let posed = model.pose(&pose);
-        let mut mesh = mesh;
+        let (mut mesh, posed, stats) = tracker.frame(&pose, previous.as_ref(), &evidence);
         mesh.vertices = tracked_surface::rounded(&mesh.vertices);
-        let offset = (mesh.vertices.iter().zip(&posed.vertices))
+        let offset = (mesh.vertices.iter().zip(&posed))
             .map(|(x, p)| (x - p).norm() as f32)
             .collect();
-        kept.insert(frame, (pose, mesh.vertices.clone()));
-        // Only the frame just tracked is the next one's previous.
-        kept.retain(|&f, _| f == frame);
+        last = Some((frame, pose, mesh.vertices.clone()));
         let secs = started.elapsed().as_secs_f64();
         done(
             frame,

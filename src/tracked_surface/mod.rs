@@ -219,13 +219,14 @@ impl<'a> Tracker<'a> {
         (targets, posed)
     }
 
-    /// Tracks one frame: the posed model of `pose`, deformed to `evidence`.
+    /// Tracks one frame: the posed model of `pose`, deformed to `evidence`. Returns the
+    /// tracked mesh, the bare posed model's vertices and what tracking did.
     pub fn frame(
         &self,
         pose: &Pose,
         previous: Option<&Previous>,
         evidence: &Evidence,
-    ) -> (TriMesh, TrackStats) {
+    ) -> (TriMesh, Vec<Vector3<f64>>, TrackStats) {
         let p = &self.params;
         let (targets, posed) = self.targets(pose, previous);
         let triangles = &self.model.mesh.triangles;
@@ -310,6 +311,7 @@ impl<'a> Tracker<'a> {
                 vertices,
                 triangles: triangles.clone(),
             },
+            posed,
             stats,
         )
     }
