@@ -1,8 +1,9 @@
 //! A frame's person evidence over the rig: the person model run on every camera's image,
 //! then the masks made consistent across views. A mask pixel is kept only where its viewing
-//! ray meets the visual hull of all the cameras' masks, which is exactly where the other
-//! cameras' silhouettes support it (the ray already lies in its own camera's cone); what is
-//! dropped is counted per camera.
+//! ray meets the visual hull of the cameras' masks, which is where the other cameras'
+//! silhouettes support it (the ray already lies in its own camera's cone). With four or more
+//! cameras that hull lets one camera disagree, so a limb one view's mask misses is kept in
+//! the views that show it; what is dropped is counted per camera.
 
 use super::model::{folder, PersonModel};
 use super::{PersonFrame, PersonView};
@@ -106,7 +107,8 @@ pub fn frame_evidence(
 }
 
 /// Removes from the masks of the cameras marked in `cleaned` every pixel no other camera's
-/// silhouette supports (whose ray misses the visual hull of all of `masks`); returns per
+/// silhouette supports (whose ray misses the visual hull of `masks`, one camera allowed to
+/// disagree with four or more); returns per
 /// camera the share of its mask's pixels removed (0 for the others).
 pub fn drop_unsupported(
     cams: &[Camera],
@@ -155,12 +157,20 @@ fn supported_by_hull(cams: &[Camera], masks: &[GrayImage], p: &VisualHullParams)
         .iter()
         .map(|c| GrayImage::new(c.width, c.height))
         .collect();
+    // One camera may disagree (with four or more): a limb the person model misses in one
+    // view stays in the others instead of being dropped from all of them. Such a voxel must
+    // then be seen by three cameras, so that two disagreeing views support nothing.
+    let mut lenient = p.clone();
+    if cams.len() >= 4 {
+        lenient.all_but = lenient.all_but.max(1);
+        lenient.min_views = lenient.min_views.max(3);
+    }
     let Some((lo, hi)) = visual_hull::carving_box(cams, &counts, p) else {
         return out;
     };
     let size = (hi - lo).max() / CONSISTENCY_VOXELS;
     let grid = GridSpec::covering(lo, hi, size);
-    let occupied = visual_hull::carve(&grid, cams, &counts, p);
+    let occupied = visual_hull::carve(&grid, cams, &counts, &lenient);
     let centres: Vec<Vector3<f64>> = occupied
         .iter()
         .enumerate()
@@ -202,9 +212,8 @@ fn fill_square(img: &mut GrayImage, px: Vector2<f64>, r: i64) {
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_blob_no_other_camera_sees_is_dropped_and_the_body_kept() {
-        let cams = crate::synth::scene::camera_ring(
+    fn ring() -> Vec<Camera> {
+        crate::synth::scene::camera_ring(
             &crate::synth::scene::RingSpec {
                 count: 6,
                 radius: 3.0,
@@ -215,30 +224,53 @@ mod tests {
                 height: 240,
             },
             3,
-        );
-        // A vertical cylinder (a body) seen by every camera.
-        let body = |p: &Vector3<f64>| p.x.hypot(p.y) < 0.2 && p.z > 0.2 && p.z < 1.6;
-        let mut masks: Vec<GrayImage> = cams
-            .iter()
+        )
+    }
+
+    /// Each camera's mask of the points `points`.
+    fn masks_of(cams: &[Camera], points: &[Vector3<f64>]) -> Vec<GrayImage> {
+        cams.iter()
             .map(|c| {
                 let mut m = GrayImage::new(c.width, c.height);
-                for z in 0..70 {
-                    for a in 0..72 {
-                        for r in [0.05, 0.1, 0.15, 0.19] {
-                            let t = (a as f64 * 5.0).to_radians();
-                            let p = Vector3::new(r * t.cos(), r * t.sin(), 0.21 + z as f64 * 0.02);
-                            if let Some(px) = c.project(&p) {
-                                if body(&p) && c.in_image(&px) {
-                                    fill_square(&mut m, px, 1);
-                                }
-                            }
+                for p in points {
+                    if let Some(px) = c.project(p) {
+                        if c.in_image(&px) {
+                            fill_square(&mut m, px, 1);
                         }
                     }
                 }
                 m
             })
-            .collect();
-        let body_pixels = masks[2].pixels().filter(|p| p.0[0] > 0).count();
+            .collect()
+    }
+
+    /// A vertical cylinder 0.2 m in radius from 0.21 to 1.6 m (a body), sampled densely.
+    fn body_points() -> Vec<Vector3<f64>> {
+        let mut points = Vec::new();
+        for z in 0..70 {
+            for a in 0..72 {
+                for r in [0.05, 0.1, 0.15, 0.19] {
+                    let t = (a as f64 * 5.0).to_radians();
+                    points.push(Vector3::new(
+                        r * t.cos(),
+                        r * t.sin(),
+                        0.21 + z as f64 * 0.02,
+                    ));
+                }
+            }
+        }
+        points
+    }
+
+    fn count(m: &GrayImage) -> usize {
+        m.pixels().filter(|p| p.0[0] > 0).count()
+    }
+
+    #[test]
+    fn a_blob_no_other_camera_sees_is_dropped_and_the_body_kept() {
+        let cams = ring();
+        let mut masks = masks_of(&cams, &body_points());
+        let body_pixels = count(&masks[2]);
         // Camera 2 also marks a blob in the image's corner (the room, a bystander).
         for y in 0..40 {
             for x in 0..40 {
@@ -259,6 +291,44 @@ mod tests {
         );
         for (c, d) in dropped.iter().enumerate().filter(|(c, _)| *c != 2) {
             assert!(*d < 0.02, "camera {c} lost {d} of the body");
+        }
+    }
+
+    /// An arm (a bar held out from the body) that one camera's mask misses, as the person
+    /// model does with a forearm seen from behind: the other cameras keep it.
+    #[test]
+    fn a_limb_one_camera_misses_stays_in_the_others() {
+        let cams = ring();
+        let body = body_points();
+        let mut with_arm = body.clone();
+        for i in 0..40 {
+            for j in -3..=3 {
+                for k in -3..=3 {
+                    let (dy, dz) = (j as f64 * 0.01, k as f64 * 0.01);
+                    with_arm.push(Vector3::new(0.2 + i as f64 * 0.01, dy, 1.3 + dz));
+                }
+            }
+        }
+        let mut masks = masks_of(&cams, &with_arm);
+        masks[4] = masks_of(&cams[4..5], &body).remove(0);
+        let arm_pixels: Vec<usize> = masks.iter().map(count).collect();
+        let body_pixels: Vec<usize> = masks_of(&cams, &body).iter().map(count).collect();
+        // The box the keypoints give (the body's reach grown by 0.3 m).
+        let hull = VisualHullParams {
+            bbox: Some(crate::recon::visual_hull::BoundingBox {
+                min: [-0.5, -0.5, -0.1],
+                max: [0.9, 0.5, 1.9],
+            }),
+            ..Default::default()
+        };
+        drop_unsupported(&cams, &mut masks, &[true; 6], &hull);
+        for c in (0..6).filter(|&c| c != 4) {
+            let arm = arm_pixels[c] - body_pixels[c];
+            let kept = count(&masks[c]) as f64 - body_pixels[c] as f64;
+            assert!(
+                kept >= 0.9 * arm as f64,
+                "camera {c} kept {kept} of the arm's {arm} pixels"
+            );
         }
     }
 }
