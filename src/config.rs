@@ -359,10 +359,13 @@ pub enum Format {
     Trc,
     /// C3D: every joint per frame as a 3D point, millimetres, +Y up.
     C3d,
+    /// The tracked surface as one animated mesh: the rest mesh (OBJ) with its point caches
+    /// (PC2, MDD) and the same sequence as a glb of morph targets, +Y up.
+    Surface,
 }
 
 impl Format {
-    pub const ALL: [Format; 7] = [
+    pub const ALL: [Format; 8] = [
         Format::Glb,
         Format::Bvh,
         Format::Ply,
@@ -370,19 +373,28 @@ impl Format {
         Format::Overlay,
         Format::Trc,
         Format::C3d,
+        Format::Surface,
     ];
 
     /// Whether the format needs the fitted motion (a skeleton).
     pub fn needs_motion(self) -> bool {
         matches!(
             self,
-            Format::Glb | Format::Bvh | Format::Overlay | Format::Trc | Format::C3d
+            Format::Glb
+                | Format::Bvh
+                | Format::Overlay
+                | Format::Trc
+                | Format::C3d
+                | Format::Surface
         )
     }
 
     /// Whether the format times the motion (needs `export.frame_rate`).
     pub fn is_timed(self) -> bool {
-        matches!(self, Format::Glb | Format::Bvh | Format::Trc | Format::C3d)
+        matches!(
+            self,
+            Format::Glb | Format::Bvh | Format::Trc | Format::C3d | Format::Surface
+        )
     }
 }
 
@@ -414,7 +426,13 @@ pub struct ExportParams {
 impl Default for ExportParams {
     fn default() -> Self {
         ExportParams {
-            formats: vec![Format::Glb, Format::Bvh, Format::Ply, Format::Overlay],
+            formats: vec![
+                Format::Glb,
+                Format::Bvh,
+                Format::Ply,
+                Format::Overlay,
+                Format::Surface,
+            ],
             frame_rate: None,
             up_axis: None,
             bvh_rotation_order: "ZXY".into(),

@@ -1,4 +1,5 @@
-//! glTF 2.0 binary (.glb): the skinned body model with the fitted motion as an animation.
+//! glTF 2.0 binary (.glb): the skinned body model with the fitted motion as an animation,
+//! and a mesh sequence as morph targets ([`morph_sequence_glb`]).
 //!
 //! One node per bone, placed at the bone's head: its rest translation is the head's offset
 //! from the parent's head at t0 (the root's: its head), its rest rotation the identity, so the
@@ -80,6 +81,17 @@ impl Buffer {
         self.accessors[a]["min"] = json!(lo);
         self.accessors[a]["max"] = json!(hi);
         a
+    }
+
+    /// The .glb of `doc` with this buffer as its one buffer (views and accessors added).
+    fn into_glb(mut self, mut doc: Value) -> Vec<u8> {
+        while !self.data.len().is_multiple_of(4) {
+            self.data.push(0);
+        }
+        doc["buffers"] = json!([{ "byteLength": self.data.len() }]);
+        doc["bufferViews"] = json!(self.views);
+        doc["accessors"] = json!(self.accessors);
+        glb_container(&doc, &self.data)
     }
 }
 
@@ -287,13 +299,88 @@ pub fn to_glb(
     if !poses.is_empty() {
         doc["animations"] = json!([animation]);
     }
-    while !buf.data.len().is_multiple_of(4) {
-        buf.data.push(0);
+    buf.into_glb(doc)
+}
+
+/// The .glb bytes of one mesh moving through `frames` (each one position per vertex, the
+/// same count in all, already in glTF's axes) at `frame_rate` frames per second, as morph
+/// targets: the base is the first frame, target k-1 holds frame k's offsets from it, and the
+/// animation's key k sets target k-1's weight to 1 and the others to 0 (linear in between).
+/// Morph targets, not one node per frame: one mesh that viewers and Blender (shape keys)
+/// treat as one object, and the same size (the vertex positions of every frame). No normals
+/// are written, so viewers shade each frame's own triangles. `names` name the targets
+/// (`mesh.extras.targetNames`). `None` when the file would pass glb's 4 GiB limit.
+pub fn morph_sequence_glb(
+    triangles: &[[u32; 3]],
+    frames: &[Vec<[f32; 3]>],
+    names: &[String],
+    frame_rate: f64,
+    name: &str,
+) -> Option<Vec<u8>> {
+    let vertices = frames.first().map_or(0, Vec::len);
+    let estimate = frames.len() * vertices * 12 + triangles.len() * 12 + frames.len().pow(2) * 4;
+    if estimate >= u32::MAX as usize - (1 << 20) {
+        return None;
     }
-    doc["buffers"] = json!([{ "byteLength": buf.data.len() }]);
-    doc["bufferViews"] = json!(buf.views);
-    doc["accessors"] = json!(buf.accessors);
-    glb_container(&doc, &buf.data)
+    let mut buf = Buffer::default();
+    let flat = |f: &Vec<[f32; 3]>| -> Vec<f32> { f.iter().flatten().copied().collect() };
+    let base = &frames[0];
+    let position_acc = buf.floats(&flat(base), 3, "VEC3", Some(ARRAY_BUFFER));
+    let indices: Vec<u8> = triangles
+        .iter()
+        .flatten()
+        .flat_map(|i| i.to_le_bytes())
+        .collect();
+    let index_view = buf.view(&indices, Some(ELEMENT_ARRAY_BUFFER));
+    let index_acc = buf.accessor(index_view, UNSIGNED_INT, triangles.len() * 3, "SCALAR");
+    let targets: Vec<Value> = frames[1..]
+        .iter()
+        .map(|f| {
+            let delta: Vec<f32> = f
+                .iter()
+                .zip(base)
+                .flat_map(|(p, b)| [p[0] - b[0], p[1] - b[1], p[2] - b[2]])
+                .collect();
+            json!({ "POSITION": buf.floats(&delta, 3, "VEC3", Some(ARRAY_BUFFER)) })
+        })
+        .collect();
+    let n_targets = targets.len();
+    let mut primitive = json!({
+        "attributes": { "POSITION": position_acc },
+        "indices": index_acc,
+        "mode": 4,
+    });
+    let mut mesh = json!({ "name": format!("{name}_surface"), "primitives": [] });
+    let mut doc = json!({
+        "asset": { "version": "2.0", "generator": "hullpose" },
+        "scene": 0,
+        "scenes": [{ "name": name, "nodes": [0] }],
+        "nodes": [{ "name": format!("{name}_surface"), "mesh": 0 }],
+    });
+    if n_targets > 0 {
+        primitive["targets"] = json!(targets);
+        mesh["weights"] = json!(vec![0.0; n_targets]);
+        mesh["extras"] = json!({ "targetNames": names.get(1..).unwrap_or_default() });
+        let times: Vec<f32> = (0..frames.len())
+            .map(|k| (k as f64 / frame_rate) as f32)
+            .collect();
+        let time_acc = buf.floats(&times, 1, "SCALAR", None);
+        let mut weights = vec![0f32; frames.len() * n_targets];
+        for k in 1..frames.len() {
+            weights[k * n_targets + k - 1] = 1.0;
+        }
+        let bytes: Vec<u8> = weights.iter().flat_map(|w| w.to_le_bytes()).collect();
+        let view = buf.view(&bytes, None);
+        let weight_acc = buf.accessor(view, FLOAT, weights.len(), "SCALAR");
+        doc["animations"] = json!([{
+            "name": name,
+            "samplers": [{ "input": time_acc, "output": weight_acc, "interpolation": "LINEAR" }],
+            "channels": [{ "sampler": 0, "target": { "node": 0, "path": "weights" } }],
+        }]);
+    }
+    mesh["primitives"] = json!([primitive]);
+    doc["meshes"] = json!([mesh]);
+    Some(buf.into_glb(doc))
 }
 
 /// The GLB container: 12-byte header, the JSON chunk (space-padded) and the BIN chunk

@@ -7,13 +7,17 @@
 //! Layout under `<output>/export/`: `<sequence>.glb`, `<sequence>.bvh`, `<sequence>.trc`,
 //! `<sequence>.c3d` and `world.yaml` (how they place the world: [`export_frame`]),
 //! `meshes/<stage>/NNNNNN.{ply,obj}` (stages visual_hull, graphcut, fit, surface) and
-//! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png` and `contact_sheets/NNNNNN.png`.
+//! `meshes/model.{ply,obj}`, `overlays/<camera>/NNNNNN.png`, `contact_sheets/NNNNNN.png`
+//! and `surface/<sequence>.{obj,pc2,mdd,glb}` (the tracked surface as one animated mesh:
+//! [`surface_sequence`]).
 
 pub mod bvh;
 pub mod gltf;
 pub mod markers;
 pub mod meshes;
 pub mod overlays;
+pub mod point_cache;
+pub mod surface_sequence;
 
 use crate::config::Format;
 use crate::error::{Error, Result};
@@ -94,6 +98,9 @@ pub fn from_cache(job: &crate::runner::Job, formats: &[Format]) -> Result<Finish
     let mut stages = vec!["visual_hull", "graphcut"];
     if job.sequence.skeleton()?.is_some() {
         stages.extend(["model", "fit"]);
+        if formats.contains(&Format::Surface) {
+            stages.push(crate::artifacts::tracked_surface::STAGE);
+        }
     }
     job.require_cached(&stages)?;
     run(&job.context(), &job.frames, formats)
@@ -195,6 +202,17 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
         let (Some((model, poses)), Some(frame)) = (motion.as_ref(), frame.as_ref()) else {
             continue;
         };
+        if format == Format::Surface {
+            let frames: Vec<u32> = poses.iter().map(|(f, _)| *f).collect();
+            let (files, warnings) =
+                surface_sequence::write(ctx, &frames, frame, animation_rate, &out)?;
+            written.files += files.len();
+            if !files.is_empty() {
+                written.outputs.push(out.join(surface_sequence::FOLDER));
+            }
+            written.warnings.extend(warnings);
+            continue;
+        }
         let (path, bytes) = match format {
             Format::Glb => {
                 let path = out.join(format!("{name}.glb"));
@@ -218,7 +236,7 @@ pub fn run(ctx: &Context, frames: &[u32], formats: &[Format]) -> Result<Finished
                     .map_err(|m| Error::invalid(&path, m))?;
                 (path, bytes)
             }
-            Format::Ply | Format::Obj | Format::Overlay => continue,
+            Format::Ply | Format::Obj | Format::Overlay | Format::Surface => continue,
         };
         crate::fsutil::write_atomic(&path, &bytes)?;
         written.outputs.push(path);

@@ -60,7 +60,7 @@ fn synth_export_yaml(frames: usize, opts: &SynthOptions) -> String {
         String::new()
     };
     format!(
-        "{up}# exports (glb, bvh, ply, overlay; add obj to formats for OBJ copies) under output/export/\n\
+        "{up}# exports (glb, bvh, ply, overlay, surface; add obj to formats for OBJ copies) under output/export/\n\
          export:\n  frame_rate: {}        # the motion's key frames at {key_rate} per second\n",
         (rate * 100.0).round() / 100.0
     )

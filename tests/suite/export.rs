@@ -1,11 +1,15 @@
 //! Exports of the bundled sample: the .glb passes the Khronos glTF-Validator and its
 //! animation reproduces joints.csv; an independent BVH reader (bvhio) puts every joint where
-//! joints.csv has it, and so do OpenSim (the TRC) and ezc3d (the C3D); PLY / OBJ meshes read back whole with their attributes; overlays and
-//! contact sheets are written; `pipeline export` rewrites a format from the cache alone.
+//! joints.csv has it, and so do OpenSim (the TRC) and ezc3d (the C3D); PLY / OBJ meshes read
+//! back whole with their attributes; Blender plays the tracked surface's point caches (PC2,
+//! MDD) onto its rest mesh as the per-frame PLY has it, and its morph-target glb passes the
+//! validator and holds every frame; overlays and contact sheets are written; `pipeline
+//! export` rewrites a format from the cache alone.
 //!
 //! The external checkers (tools/validate_gltf.cjs with npm's gltf-validator under
 //! tools/node_modules, tools/check_bvh.py with PyPI's bvhio, tools/check_markers.py with
-//! PyPI's opensim and ezc3d) are installed by `.ci/run`;
+//! PyPI's opensim and ezc3d, tools/check_point_cache.py run by Debian's blender) are
+//! installed by `.ci/run`;
 //! with `HULLPOSE_EXTERNAL_CHECKS=1` (as CI sets it) a missing checker fails the test,
 //! otherwise it is skipped with a note.
 
@@ -32,7 +36,7 @@ fn sample_run() -> &'static Path {
             .replace("frames: all", "frames: 0..2")
             .replace(
                 "export:\n",
-                "export:\n  formats: [glb, bvh, ply, obj, overlay, trc, c3d]\n",
+                "export:\n  formats: [glb, bvh, ply, obj, overlay, trc, c3d, surface]\n",
             );
         assert!(yaml.contains("up: +z"), "the sample declares its up axis");
         std::fs::write(dir.path().join("pipeline.yaml"), yaml).unwrap();
@@ -340,6 +344,103 @@ fn meshes_read_back_with_their_attributes() {
         .count();
     let total = text.lines().filter(|l| l.starts_with("v ")).count();
     assert!(grey * 10 < total, "{grey} of {total} vertices unseen");
+}
+
+/// The tracked surface as one animated mesh (export format `surface`): Blender, opening the
+/// rest OBJ with its default axes and adding a Mesh Cache modifier with its defaults, shows
+/// at scene frame 2 the vertices of `meshes/surface/000002.ply` turned into the export
+/// frame (within f32 rounding), from the PC2 and from the MDD alike. The glb of morph
+/// targets passes the Khronos validator, and its base plus target k is frame k.
+#[test]
+fn the_tracked_surface_plays_in_blender_and_the_glb() {
+    let dir = sample_run();
+    let folder = dir.join("output/export/surface");
+    let frame = export_frame(dir);
+    let expected: Vec<Vector3<f64>> = (0..3)
+        .map(|f| {
+            let ply = dir.join(format!("output/export/meshes/surface/{f:06}.ply"));
+            hullpose::geometry::ply::read_ply(&ply).unwrap().vertices
+        })
+        .map(|vs| vs.iter().map(|v| frame.point(v)).collect::<Vec<_>>())
+        .collect::<Vec<_>>()
+        .concat();
+    let per_frame = expected.len() / 3;
+    let near = |got: &[f32], want: &[Vector3<f64>], what: &str| {
+        assert_eq!(got.len(), want.len() * 3, "{what}: vertex count");
+        let worst = want
+            .iter()
+            .zip(got.chunks_exact(3))
+            .map(|(w, g)| (w - Vector3::new(g[0] as f64, g[1] as f64, g[2] as f64)).norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "{what}: {worst} m from the PLY");
+    };
+
+    let (doc, bin) = read_glb(&folder.join("tripod.glb"));
+    let primitive = &doc["meshes"][0]["primitives"][0];
+    let base = floats(
+        &doc,
+        &bin,
+        primitive["attributes"]["POSITION"].as_u64().unwrap() as usize,
+    );
+    near(&base, &expected[..per_frame], "glb base");
+    for k in 1..3 {
+        let target = primitive["targets"][k - 1]["POSITION"].as_u64().unwrap() as usize;
+        let moved: Vec<f32> = base
+            .iter()
+            .zip(floats(&doc, &bin, target))
+            .map(|(b, d)| b + d)
+            .collect();
+        near(
+            &moved,
+            &expected[k * per_frame..(k + 1) * per_frame],
+            "glb target",
+        );
+    }
+    let script = repo_tools().join("validate_gltf.cjs");
+    let probe = format!(
+        "require('{}')",
+        repo_tools().join("node_modules/gltf-validator").display()
+    );
+    let glb = folder.join("tripod.glb");
+    if let Some((ok, report)) = external(
+        "node",
+        &[script.to_str().unwrap(), glb.to_str().unwrap()],
+        &["-e", &probe],
+    ) {
+        assert!(ok && report.starts_with("errors 0 warnings 0"), "{report}");
+    }
+
+    let script = repo_tools().join("check_point_cache.py");
+    let rest = folder.join("tripod.obj");
+    for cache in ["tripod.pc2", "tripod.mdd"] {
+        let out = tempfile::NamedTempFile::new().unwrap();
+        let cache = folder.join(cache);
+        let args = [
+            "-b",
+            "--factory-startup",
+            "--python",
+            script.to_str().unwrap(),
+            "--",
+            rest.to_str().unwrap(),
+            cache.to_str().unwrap(),
+            "2",
+            out.path().to_str().unwrap(),
+        ];
+        let Some((ok, report)) = external("blender", &args, &["-b", "--version"]) else {
+            return;
+        };
+        assert!(ok, "{report}");
+        let got: Vec<f32> = std::fs::read(out.path())
+            .unwrap()
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect();
+        near(
+            &got,
+            &expected[2 * per_frame..],
+            &format!("blender with {}", cache.display()),
+        );
+    }
 }
 
 #[test]
