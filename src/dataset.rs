@@ -596,6 +596,27 @@ impl Sequence {
             .unwrap_or_else(|| "sequence".into())
     }
 
+    /// This capture without camera `name` (its frames, masks and plates left out): for
+    /// scoring reconstructions in a view they never saw.
+    pub fn without_camera(&self, name: &str) -> Result<Sequence> {
+        let Some(c) = self.cameras.iter().position(|cam| cam.name == name) else {
+            return Err(Error::Usage(format!(
+                "camera {} is not in the calibration (cameras: {})",
+                crate::text::quoted(name),
+                self.cameras
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        };
+        let mut out = self.clone();
+        out.cameras.remove(c);
+        out.sources.remove(c);
+        out.undecoded.retain(|u| u != name);
+        Ok(out)
+    }
+
     /// The frame a tracked frame `f` starts from: its neighbour nearer to t0 (none for t0
     /// or a frame outside the sequence).
     pub fn tracked_previous(&self, f: u32, t0: u32) -> Option<u32> {

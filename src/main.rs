@@ -125,6 +125,10 @@ enum Command {
         /// Frames to evaluate, A..B inclusive (overrides pipeline.yaml).
         #[arg(long, value_name = "A..B", value_parser = parse_range)]
         frames: Option<FrameRange>,
+        /// Instead: rebuild, fit and track the frames without this camera (cache and
+        /// output under holdout/CAM/) and score each surface's silhouette IoU in it.
+        #[arg(long, value_name = "CAM")]
+        holdout: Option<String>,
     },
     /// Whether a fitted frame's pose is wrong: from the cached fit, search for a pose whose
     /// model explains the frame's silhouettes better (a higher worst-camera IoU, fit.csv's
@@ -578,9 +582,16 @@ fn run(cli: Cli) -> hullpose::Result<()> {
             let job = Job::load(Config::load(&file)?, frames)?;
             hullpose::commands::ablation::ablation(&job)?;
         }
-        Command::Evaluate { file, frames } => {
+        Command::Evaluate {
+            file,
+            frames,
+            holdout,
+        } => {
             let job = Job::load(Config::load(&file)?, frames)?;
-            hullpose::commands::evaluate::evaluate(&job)?;
+            match holdout {
+                Some(camera) => hullpose::commands::evaluate::evaluate_holdout(&job, &camera)?,
+                None => hullpose::commands::evaluate::evaluate(&job)?,
+            }
         }
         Command::PoseSearch { file, frame, tries } => {
             let job = Job::load(Config::load(&file)?, Some(FrameRange::single(frame)))?;

@@ -218,6 +218,37 @@ impl Job {
         })
     }
 
+    /// This job without camera `name`, with its own cache and output under
+    /// `holdout/<name>/` of the job's: the frames rebuilt and tracked as if the camera had
+    /// not been there. The learned background is refused (its plates live in the job's own
+    /// cache, learned with the camera).
+    pub fn holding_out(&self, name: &str) -> Result<Job> {
+        let sequence = self.sequence.without_camera(name)?;
+        if crate::stages::silhouette::resolve_method(&self.config, &self.sequence)?
+            == crate::recon::silhouette::SilhouetteMethod::Learned
+        {
+            return Err(Error::Usage(format!(
+                "holding out camera {} needs silhouettes that do not come from plates \
+                 learned with it (silhouette.method: learned); give masks or plates, or use \
+                 the person model (silhouette.method: person)",
+                crate::text::quoted(name)
+            )));
+        }
+        let mut config = self.config.clone();
+        config.cache = self.config.cache.join("holdout").join(name);
+        config.output = self.config.output.join("holdout").join(name);
+        config.export.overlay_cameras.retain(|c| c != name);
+        let cache = Cache::new(&config.cache);
+        Ok(Job {
+            config,
+            sequence,
+            frames: self.frames.clone(),
+            cache,
+            learning: None,
+            pending: self.pending.clone(),
+        })
+    }
+
     pub fn context(&self) -> Context<'_> {
         Context::new(&self.config, &self.sequence, &self.cache)
     }

@@ -55,6 +55,21 @@ pub fn evaluate(job: &Job) -> Result<()> {
     Ok(())
 }
 
+/// `evaluate --holdout CAM`: the job rebuilt without the camera and scored in it
+/// ([`crate::eval::holdout`]); a table and `output/evaluation/holdout_<CAM>.csv`.
+pub fn evaluate_holdout(job: &Job, camera: &str) -> Result<()> {
+    let rows = crate::eval::holdout::evaluate(job, camera)?;
+    print!("{}", crate::eval::holdout::table(camera, &rows));
+    let path = job
+        .config
+        .output
+        .join("evaluation")
+        .join(format!("holdout_{camera}.csv"));
+    crate::fsutil::write_atomic(&path, crate::eval::holdout::to_csv(&rows).as_bytes())?;
+    println!("written to {}", path.display());
+    Ok(())
+}
+
 /// The tracked surface's part of `evaluate` that needs no truth: its worst silhouette IoU
 /// per frame beside the graph cut's and the posed model's.
 fn evaluate_tracked_silhouettes(job: &Job) -> Result<()> {

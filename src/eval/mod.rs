@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use std::fmt::Write as _;
 
 pub mod health_table;
+pub mod holdout;
 pub mod pose;
 pub mod pose_search;
 pub mod reliability;
@@ -326,23 +327,30 @@ pub(crate) fn coverage_of(
         .cameras
         .par_iter()
         .zip(masks.par_iter().zip(rays.par_iter()))
-        .map(|(cam, (mask, rays))| {
-            let frags =
-                crate::geometry::raster::rasterize(cam, rays, &mesh.vertices, &mesh.triangles);
-            let (mut sil, mut both, mut either) = (0usize, 0usize, 0usize);
-            for (m, f) in mask.as_raw().iter().zip(&frags) {
-                let (inside, drawn) = (*m >= 128, f.is_some());
-                sil += inside as usize;
-                both += (inside && drawn) as usize;
-                either += (inside || drawn) as usize;
-            }
-            SilhouetteAgreement {
-                camera: cam.name.clone(),
-                coverage: both as f64 / sil.max(1) as f64,
-                iou: both as f64 / either.max(1) as f64,
-            }
-        })
+        .map(|(cam, (mask, rays))| agreement(cam, rays, mask, mesh))
         .collect())
+}
+
+/// How `mesh`, drawn in `cam` at full resolution, agrees with the silhouette `mask` there.
+pub(crate) fn agreement(
+    cam: &crate::camera::Camera,
+    rays: &crate::geometry::raster::PixelRays,
+    mask: &image::GrayImage,
+    mesh: &TriMesh,
+) -> SilhouetteAgreement {
+    let frags = crate::geometry::raster::rasterize(cam, rays, &mesh.vertices, &mesh.triangles);
+    let (mut sil, mut both, mut either) = (0usize, 0usize, 0usize);
+    for (m, f) in mask.as_raw().iter().zip(&frags) {
+        let (inside, drawn) = (*m >= 128, f.is_some());
+        sil += inside as usize;
+        both += (inside && drawn) as usize;
+        either += (inside || drawn) as usize;
+    }
+    SilhouetteAgreement {
+        camera: cam.name.clone(),
+        coverage: both as f64 / sil.max(1) as f64,
+        iou: both as f64 / either.max(1) as f64,
+    }
 }
 
 /// The CSV text of reconstruction rows.
