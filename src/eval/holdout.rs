@@ -87,6 +87,9 @@ pub fn evaluate(job: &Job, camera: &str) -> Result<Vec<HoldoutRow>> {
     Ok(rows)
 }
 
+/// A column of the table: its name and its value in a row.
+type Column = (&'static str, fn(&HoldoutRow) -> Option<f64>);
+
 fn cell(x: Option<f64>) -> String {
     x.map_or("-".into(), |v| format!("{v:.3}"))
 }
@@ -117,7 +120,7 @@ pub fn table(camera: &str, rows: &[HoldoutRow]) -> String {
             cell(r.tracked_with_camera)
         );
     }
-    let columns: [(&str, fn(&HoldoutRow) -> Option<f64>); 4] = [
+    let columns: [Column; 4] = [
         ("graph cut", |r| r.refined),
         ("posed model", |r| r.posed),
         ("tracked", |r| r.tracked),

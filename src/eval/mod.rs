@@ -416,12 +416,10 @@ pub fn reconstruction_table(rows: &[ReconRow]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::isosurface::{extract, ScalarGrid};
 
     /// A sphere of `radius` about the origin, meshed from its distance field (2 mm samples).
     fn sphere(radius: f64) -> TriMesh {
-        let r = Vector3::repeat(radius + 0.01);
-        extract(&ScalarGrid::sample(-r, r, 0.002, |p| p.norm() - radius))
+        crate::geometry::isosurface::sphere(radius, Vector3::zeros(), 0.002)
     }
 
     /// A reconstruction 5 mm too fat is 5 mm outside with every vertex outside, and

@@ -68,11 +68,7 @@ mod tests {
 
     /// A sphere meshed from its distance field (5 mm samples).
     fn sphere(r: f64, centre: Vector3<f64>) -> TriMesh {
-        use crate::geometry::isosurface::{extract, ScalarGrid};
-        let e = Vector3::repeat(r + 0.01);
-        extract(&ScalarGrid::sample(centre - e, centre + e, 0.005, |p| {
-            (p - centre).norm() - r
-        }))
+        crate::geometry::isosurface::sphere(r, centre, 0.005)
     }
 
     #[test]

@@ -247,6 +247,16 @@ pub fn extract(grid: &ScalarGrid) -> TriMesh {
     mesh
 }
 
+/// A sphere of radius `r` (metres) about `centre`, meshed from its distance field sampled
+/// every `spacing` metres: a closed test surface.
+#[cfg(test)]
+pub fn sphere(r: f64, centre: Vector3<f64>, spacing: f64) -> TriMesh {
+    let e = Vector3::repeat(r + 2.0 * spacing.max(0.005));
+    extract(&ScalarGrid::sample(centre - e, centre + e, spacing, |p| {
+        (p - centre).norm() - r
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

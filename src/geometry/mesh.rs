@@ -50,6 +50,20 @@ impl TriMesh {
         normals
     }
 
+    /// The mean length of the triangles' edges (each counted once per triangle), metres;
+    /// 0 without triangles.
+    pub fn mean_edge_length(&self) -> f64 {
+        let total: f64 = self
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.vertices[i as usize]);
+                (b - a).norm() + (c - b).norm() + (a - c).norm()
+            })
+            .sum();
+        total / (3 * self.triangles.len()).max(1) as f64
+    }
+
     /// Signed volume enclosed by the mesh (positive when outward oriented), cubic metres.
     pub fn signed_volume(&self) -> f64 {
         self.triangles

@@ -12,6 +12,7 @@
 //!
 //!   E(δ) = Σ_i w_i |N_i (x_i − c_i)|²            the observed surface
 //!        + s Σ_i Σ_k |Q_ik (x_i − q_ik)|²         the silhouettes
+//!        + ρ Σ_(i,k) rim |Q_ik (x_i − u_ik)|²       the rims
 //!        + λ_e Σ_(i,j) edge |δ_i − δ_j|²            the target's shape (`surface.shape`)
 //!        + λ_a Σ_i |δ_i|²                            the target where nothing is seen
 //!
@@ -27,6 +28,11 @@
 //!   nearest silhouette pixel; Q_ik = I − r rᵀ (r the viewing ray) leaves the depth free.
 //!   So a phantom or a contact gap the masks do not confirm is not copied, and no part of
 //!   the surface leaves a mask. s = `surface.silhouette`.
+//! - u_ik: for a rim vertex of camera k (|n_i·r| ≤ 0.3) that is the nearest, in the
+//!   image, to outline pixels of the mask lying farther from it than the tolerance and a
+//!   projected edge (pixels no part of the surface explains), the point at its depth on
+//!   the ray through their mean, within twice `surface.reach` (Vlasic et al. 2008's rim
+//!   constraint: the mask's outline is the surface's). ρ = `surface.rim`.
 //!
 //! The correspondences are found again `surface.rounds` times, each round solving the
 //! quadratic energy from the last one's offsets.
@@ -66,6 +72,9 @@ pub struct SurfaceParams {
     pub silhouette: f64,
     /// How far outside a silhouette a vertex may project before it is pulled back, pixels.
     pub silhouette_tolerance: f64,
+    /// ρ: weight of the rim terms (outline pixels the surface leaves unexplained pull its
+    /// nearest outline vertex out to them).
+    pub rim: f64,
     /// How often the correspondences are found again.
     pub rounds: usize,
 }
@@ -79,6 +88,7 @@ impl Default for SurfaceParams {
             memory: 0.8,
             silhouette: 1.0,
             silhouette_tolerance: 1.0,
+            rim: 1.0,
             rounds: 3,
         }
     }
@@ -86,13 +96,14 @@ impl Default for SurfaceParams {
 
 /// Checks the parameters' ranges.
 pub fn validate(p: &SurfaceParams) -> std::result::Result<(), Refusal> {
-    let checks: [(&str, f64, f64, f64); 6] = [
+    let checks: [(&str, f64, f64, f64); 7] = [
         ("reach", p.reach, 0.0, 0.5),
         ("shape", p.shape, 0.0, 1e4),
         ("anchor", p.anchor, 1e-6, 1e4),
         ("memory", p.memory, 0.0, 1.0),
         ("silhouette", p.silhouette, 0.0, 1e4),
         ("silhouette_tolerance", p.silhouette_tolerance, 0.0, 1e3),
+        ("rim", p.rim, 0.0, 1e4),
     ];
     for (key, value, lo, hi) in checks {
         if !(value.is_finite() && (lo..=hi).contains(&value)) {
@@ -145,6 +156,8 @@ pub struct Tracker<'a> {
     mass: Vec<f64>,
     coarse: solve::Coarse,
     contact: ContactSearch,
+    /// The model's mean edge length, metres.
+    edge: f64,
 }
 
 /// Normals that disagree more than this with the observed vertex's are not followed.
@@ -184,6 +197,7 @@ impl<'a> Tracker<'a> {
             coarse: solve::Coarse::new(&model.mesh.vertices, &neighbours, PATCH_CELL),
             neighbours,
             contact: ContactSearch::new(model, contact),
+            edge: model.mesh.mean_edge_length(),
         }
     }
 
@@ -284,6 +298,22 @@ impl<'a> Tracker<'a> {
                     (block, pull, followed, pulls)
                 })
                 .collect();
+            let mut terms = terms;
+            if p.rim > 0.0 {
+                let pulls: Vec<Vec<(usize, Vector3<f64>)>> = (evidence.cameras.par_iter())
+                    .zip(evidence.silhouettes)
+                    .map(|(cam, field)| rim_targets(cam, field, &current, &normals, self.edge, p))
+                    .collect();
+                for (cam, pulls) in evidence.cameras.iter().zip(pulls) {
+                    for (i, q) in pulls {
+                        let ray = (current.vertices[i] - cam.centre()).normalize();
+                        let m = (Matrix3::identity() - ray * ray.transpose()) * p.rim;
+                        terms[i].0 += m;
+                        terms[i].1 += m * (q - targets[i]);
+                        terms[i].3 += 1;
+                    }
+                }
+            }
             stats.followed_share = terms.iter().filter(|t| t.2).count() as f64 / n.max(1) as f64;
             stats.silhouette_pulls = terms.iter().filter(|t| t.3 > 0).count();
             let system = solve::System {
@@ -317,6 +347,67 @@ impl<'a> Tracker<'a> {
     }
 }
 
+/// Rim vertices: their normal this close to perpendicular to the viewing ray (|n·r|).
+const RIM_COSINE: f64 = 0.3;
+
+/// The rim terms of one camera: every outline pixel of its silhouette is given to the
+/// nearest rim vertex in the image (one whose normal is nearly perpendicular to its
+/// viewing ray); an outline pixel farther from it than the tolerance and a projected edge
+/// is not explained by the surface, and the vertex is pulled to the mean of its
+/// unexplained pixels, at its own depth (free along the ray), when that lies within
+/// twice `surface.reach`. (vertex, target) pairs.
+fn rim_targets(
+    cam: &Camera,
+    field: &NearestInside,
+    mesh: &TriMesh,
+    normals: &[Vector3<f64>],
+    edge: f64,
+    p: &SurfaceParams,
+) -> Vec<(usize, Vector3<f64>)> {
+    let limit = 2.0 * p.reach;
+    let focal = cam.fx.max(cam.fy);
+    let rim: Vec<(usize, Vector2<f64>, f64)> = (0..mesh.vertices.len())
+        .filter_map(|i| {
+            let x = mesh.vertices[i];
+            let ray = (x - cam.centre()).normalize();
+            if normals[i].dot(&ray).abs() > RIM_COSINE {
+                return None;
+            }
+            let (px, depth) = cam.project_with_depth(&x);
+            (depth > 0.0 && cam.in_image(&px)).then_some((i, px, depth))
+        })
+        .collect();
+    if rim.is_empty() {
+        return Vec::new();
+    }
+    let points: Vec<Vector3<f64>> = rim
+        .iter()
+        .map(|r| Vector3::new(r.1.x, r.1.y, 0.0))
+        .collect();
+    let tree = NearestTree::new(&points);
+    let mut sums: std::collections::BTreeMap<usize, (Vector2<f64>, usize)> = Default::default();
+    for &(x, y) in &field.contour {
+        let px = Vector2::new(x as f64, y as f64);
+        let Some((k, d2)) = tree.nearest(&Vector3::new(px.x, px.y, 0.0)) else {
+            continue;
+        };
+        let (_, _, depth) = rim[k];
+        let explained = p.silhouette_tolerance + 0.5 + focal * edge / depth;
+        if d2.sqrt() > explained {
+            let e = sums.entry(k).or_insert((Vector2::zeros(), 0));
+            e.0 += px;
+            e.1 += 1;
+        }
+    }
+    sums.into_iter()
+        .filter_map(|(k, (sum, count))| {
+            let (i, px, depth) = rim[k];
+            let to = sum / count as f64;
+            ((to - px).norm() * depth / focal <= limit).then(|| (i, cam.backproject(to, depth)))
+        })
+        .collect()
+}
+
 /// Where a vertex at `x` projecting outside `cam`'s silhouette by more than `tolerance`
 /// pixels is pulled: the point at its depth on the ray through the nearest silhouette
 /// pixel. `None` when it projects inside (or within the tolerance), outside the image, or
@@ -334,4 +425,61 @@ fn silhouette_target(
     let (sx, sy) = field.nearest(px.x.round() as i64, px.y.round() as i64)?;
     let to = Vector2::new(sx as f64, sy as f64);
     ((to - px).norm() > tolerance + 0.5).then(|| cam.backproject(to, depth))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sphere meshed from its distance field (1 cm samples).
+    fn sphere(r: f64) -> TriMesh {
+        crate::geometry::isosurface::sphere(r, Vector3::zeros(), 0.01)
+    }
+
+    /// A 20 cm sphere seen by a camera whose mask is the outline of a 23 cm sphere: the
+    /// outline vertices are pulled out to the mask's outline (3 cm farther from the view
+    /// axis, at their own depth); with the mask of the sphere itself nothing is pulled.
+    #[test]
+    fn an_outline_the_surface_leaves_unexplained_pulls_its_rim_out() {
+        let cam = Camera::look_at(
+            "c",
+            320,
+            240,
+            400.0,
+            Vector3::new(0.0, -3.0, 0.0),
+            Vector3::zeros(),
+            Vector3::z(),
+        );
+        let mesh = sphere(0.2);
+        let normals = mesh.vertex_normals();
+        let edge = mesh.mean_edge_length();
+        let p = SurfaceParams::default();
+        // The disk a sphere of radius r at 3 m covers in the image.
+        let mask_of = |r: f64| {
+            let centre = cam.project(&Vector3::zeros()).unwrap();
+            let radius = 400.0 * r / (9.0 - r * r).sqrt();
+            image::GrayImage::from_fn(320, 240, |x, y| {
+                let d = (Vector2::new(x as f64, y as f64) - centre).norm();
+                image::Luma([if d <= radius { 255 } else { 0 }])
+            })
+        };
+        let larger = NearestInside::new(&mask_of(0.23));
+        let pulls = rim_targets(&cam, &larger, &mesh, &normals, edge, &p);
+        assert!(pulls.len() > 20, "{} pulls", pulls.len());
+        let axis_distance = |v: &Vector3<f64>| v.x.hypot(v.z);
+        for (i, q) in &pulls {
+            let moved = axis_distance(q) - axis_distance(&mesh.vertices[*i]);
+            assert!(
+                (0.01..0.05).contains(&moved),
+                "vertex {i} moved out {moved} m"
+            );
+        }
+        let own = NearestInside::new(&mask_of(0.2));
+        let pulls = rim_targets(&cam, &own, &mesh, &normals, edge, &p);
+        assert!(
+            pulls.len() <= 2,
+            "{} pulls on the surface's own outline",
+            pulls.len()
+        );
+    }
 }

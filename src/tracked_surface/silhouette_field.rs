@@ -12,6 +12,9 @@ pub struct NearestInside {
     /// Per pixel, the index (y * width + x) of the nearest silhouette pixel; `u32::MAX`
     /// when the mask is empty.
     nearest: Vec<u32>,
+    /// The silhouette's outline: its pixels with a 4-neighbour outside it (not counting the
+    /// image's border, where the subject leaves the view), (x, y).
+    pub contour: Vec<(u32, u32)>,
 }
 
 /// A mask value above this is silhouette.
@@ -64,10 +67,23 @@ impl NearestInside {
                 offer(&mut nearest, x, y, x - 1, y);
             }
         }
+        let inside = |x: i64, y: i64| mask.get_pixel(x as u32, y as u32)[0] > INSIDE;
+        let contour = (0..hi)
+            .flat_map(|y| (0..wi).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                inside(x, y)
+                    && [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|(dx, dy)| {
+                        let (nx, ny) = (x + dx, y + dy);
+                        nx >= 0 && ny >= 0 && nx < wi && ny < hi && !inside(nx, ny)
+                    })
+            })
+            .map(|(x, y)| (x as u32, y as u32))
+            .collect();
         NearestInside {
             width: w,
             height: h,
             nearest,
+            contour,
         }
     }
 

@@ -190,6 +190,7 @@ const CHANGED: &[(&str, &str)] = &[
     ("surface.memory", "0.5"),
     ("surface.silhouette", "2.0"),
     ("surface.silhouette_tolerance", "2.0"),
+    ("surface.rim", "2.0"),
     ("surface.rounds", "4"),
 ];
 
