@@ -60,7 +60,7 @@ fn a_changed_parameter_over_the_cache_equals_a_fresh_run() {
         ),
         (
             "export",
-            "export:\n  frame_rate: 40\n  bvh_rotation_order: XYZ\n  formats: [glb, bvh, ply, obj, overlay]\n",
+            "export:\n  frame_rate: 40\n  bvh_rotation_order: XYZ\n  formats: [glb, bvh, ply, obj, overlay, surface]\n",
         ),
     ];
     let outer = tempfile::tempdir().unwrap();
