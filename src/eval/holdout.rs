@@ -145,11 +145,7 @@ pub fn table(camera: &str, rows: &[HoldoutRow]) -> String {
         "tracked below 0.95 x the graph cut's in {camera} on {} of {} frames{}",
         below.len(),
         rows.len(),
-        if below.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", below.join(", "))
-        }
+        super::tracked::listed(&below)
     );
     s
 }

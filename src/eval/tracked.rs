@@ -224,13 +224,18 @@ pub fn silhouette_table(rows: &[SilhouetteRow]) -> String {
          graph cut's on {} of {} frames{}",
         below.len(),
         rows.len(),
-        if below.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", below.join(", "))
-        }
+        listed(&below)
     );
     s
+}
+
+/// The frames `frames` as " (a, b, c)" after a count, or nothing when there are none.
+pub(crate) fn listed(frames: &[String]) -> String {
+    if frames.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", frames.join(", "))
+    }
 }
 
 /// The CSV of [`silhouette_rows`].
