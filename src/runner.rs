@@ -424,6 +424,30 @@ impl Job {
         let Some(hull) = hull else {
             return Ok(None);
         };
+        if let Some(up) = self
+            .config
+            .given_up()
+            .or_else(|| crate::geometry::up::estimate(cams, None).map(|e| e.up))
+        {
+            let floor = hull
+                .mesh
+                .vertices
+                .iter()
+                .map(|v| up.dot(v))
+                .fold(f64::INFINITY, f64::min);
+            if floor.is_finite() {
+                let exports = match self.config.world.floor {
+                    Some(f) => format!("world.floor {f:.3} m is what the exports put at Y = 0"),
+                    None => "the exports put the posed model's lowest point over the frames at \
+                             Y = 0 (world.floor sets it)"
+                        .into(),
+                };
+                println!(
+                    "floor: {floor:.3} m along the up (the lowest point of frame {frame}'s \
+                     hull); {exports}"
+                );
+            }
+        }
         let share = seen_twice_share(cams, &hull.mesh);
         println!(
             "coverage: {:.0}% of frame {frame}'s hull surface is seen by two or more of the {} \

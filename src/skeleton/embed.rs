@@ -731,14 +731,7 @@ fn unheld(template: &Skeleton, joints: &Joints, tips: &[super::follow::Extremity
     // passes the arm's root and offers about its length beyond it. (Legs are not judged
     // so: a dress hides the legs' extremities, and a real hull's phantom sheets along the
     // floor look like legs.)
-    let shoulders = {
-        let zs = joints.points.iter().map(|p| p.z);
-        let (lo, hi) = zs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), z| {
-            (a.min(z), b.max(z))
-        });
-        // The shoulders lie above this, the hips below.
-        lo + 0.65 * (hi - lo)
-    };
+    let shoulders = shoulder_line(joints);
     let misplaced = limbs.iter().any(|&leaf| {
         let Some(chain) = chains.iter().find(|c| c.last() == Some(&leaf)) else {
             return false;
@@ -1215,6 +1208,69 @@ fn leg_webs(template: &Skeleton, joints: &Joints) -> Vec<(Vector3<f64>, Vector3<
     webs
 }
 
+/// An arm's bones after its first lie at most this share of the torso's depth inside the
+/// body: 0.16-0.28 on the synthetic poses of `pipeline synth --pose` (bodies 1-4, tilted or
+/// not), 0.70-0.81 where an arm was laid through the torso (hands on the hips).
+const ARM_DEPTH_SHARE: f64 = 0.5;
+
+/// The head's chain (neck to head's tip) leans at most this far from up, degrees.
+const HEAD_TILT_DEG: f64 = 60.0;
+
+/// The height above which a joint of `joints` is at the shoulders (the hips lie below it):
+/// 65% of the way from the lowest joint to the highest.
+fn shoulder_line(joints: &Joints) -> f64 {
+    let zs = joints.points.iter().map(|p| p.z);
+    let (lo, hi) = zs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), z| {
+        (a.min(z), b.max(z))
+    });
+    lo + 0.65 * (hi - lo)
+}
+
+/// The torso's depth: the deepest point along the bones in none of `limbs`, metres.
+fn torso_depth(
+    interior: &Interior,
+    template: &Skeleton,
+    joints: &Joints,
+    limbs: &[Vec<usize>],
+) -> f64 {
+    let in_limb: Vec<usize> = limbs.iter().flatten().copied().collect();
+    (0..template.bones.len())
+        .filter(|b| !in_limb.contains(b))
+        .map(|b| {
+            let (h, t) = joints.bone(b);
+            (0..=SAMPLES)
+                .map(|k| interior.at(&(h + (t - h) * (k as f64 / SAMPLES as f64))))
+                .fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Per arm (a limb whose root lies above the shoulders' line), the deepest point along its
+/// bones after the first, as a share of the torso's depth.
+fn arm_depths(interior: &Interior, template: &Skeleton, joints: &Joints) -> Vec<(String, f64)> {
+    let limbs = limbs(template);
+    let torso_depth = torso_depth(interior, template, joints, &limbs);
+    let shoulders = shoulder_line(joints);
+    limbs
+        .iter()
+        .filter(|limb| joints.bone(limb[0]).0.z >= shoulders)
+        .map(|limb| {
+            let worst = limb[1..]
+                .iter()
+                .flat_map(|&b| {
+                    let (h, t) = joints.bone(b);
+                    (1..=SAMPLES).map(move |k| h + (t - h) * (k as f64 / SAMPLES as f64))
+                })
+                .map(|p| interior.at(&p))
+                .fold(0.0, f64::max);
+            (
+                template.bones[limb[0]].name.clone(),
+                worst / torso_depth.max(1e-9),
+            )
+        })
+        .collect()
+}
+
 /// Step 5: the refusals.
 fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<(), Refusal> {
     for (b, bone) in template.bones.iter().enumerate() {
@@ -1232,18 +1288,9 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
             .into());
         }
     }
-    // The torso's depth: the deepest point along the bones that are not in a limb.
     let limbs = limbs(template);
     let in_limb: Vec<usize> = limbs.iter().flatten().copied().collect();
-    let torso_depth = (0..template.bones.len())
-        .filter(|b| !in_limb.contains(b))
-        .map(|b| {
-            let (h, t) = joints.bone(b);
-            (0..=SAMPLES)
-                .map(|k| interior.at(&(h + (t - h) * (k as f64 / SAMPLES as f64))))
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max);
+    let torso_depth = torso_depth(interior, template, joints, &limbs);
     let children = template.children();
     for &b in &in_limb {
         if !children[b].is_empty() {
@@ -1259,6 +1306,46 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
                 template.bones[b].name,
                 100.0 * interior.at(&tail),
                 100.0 * torso_depth
+            )
+            .into());
+        }
+    }
+    // An arm laid through the torso (its forearm or hand as deep inside the body as the
+    // torso's middle, where an arm's own part is about its radius deep) is in no limb.
+    for (name, share) in arm_depths(interior, template, joints) {
+        if share > ARM_DEPTH_SHARE {
+            return Err(format!(
+                "the arm from '{name}' runs through the torso (its lower bones reach {:.0}% of \
+                 the torso's depth): it lies in no arm of the surface (hands on the hips or \
+                 arms folded against the body close loops the template cannot follow); choose \
+                 a frame where the arms stand clear of the torso with --frame",
+                100.0 * share
+            )
+            .into());
+        }
+    }
+    // The head stands up from the shoulders: an unpaired end chain above them (neck and
+    // head) tipped further than [`HEAD_TILT_DEG`] from up has been laid in an arm.
+    let shoulders = shoulder_line(joints);
+    for chain in end_chains(template) {
+        let unpaired = chain
+            .iter()
+            .all(|&b| super::sides::other_side(&template.bones[b].name).is_none());
+        let (root, end) = (
+            joints.bone(chain[0]).0,
+            joints.bone(*chain.last().expect("a chain has a bone")).1,
+        );
+        let d = end - root;
+        if !unpaired || root.z < shoulders || d.norm() < 1e-9 {
+            continue;
+        }
+        let tilt = (d.z / d.norm()).clamp(-1.0, 1.0).acos().to_degrees();
+        if tilt > HEAD_TILT_DEG {
+            return Err(format!(
+                "'{}' points {tilt:.0} degrees from up (a standing body's head is within \
+                 {HEAD_TILT_DEG:.0}): it was laid in another part of the surface; check the \
+                 world's up, or choose another frame with --frame",
+                template.bones[*chain.last().expect("a chain has a bone")].name
             )
             .into());
         }

@@ -122,7 +122,10 @@ fn tracking_from_the_automatic_skeleton_stays_within_two_and_a_half_centimetres(
         assert!(err.contains("lies far from every bone"), "{err}");
         std::fs::write(d.join("data/humanoid/skeleton.yaml"), &made).unwrap();
     } else {
-        assert!(err.contains("holds no bone"), "{err}");
+        assert!(
+            err.contains("holds no bone") || err.contains("runs through the torso"),
+            "{err}"
+        );
         assert_eq!(
             std::fs::read(d.join("data/humanoid/skeleton.yaml")).unwrap(),
             made
