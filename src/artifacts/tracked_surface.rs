@@ -1,7 +1,8 @@
 //! The surface stage's artifact per frame ([`crate::tracked_surface`]): `NNNNNN.ply`, the
 //! tracked mesh (world metres, the body model's vertices and triangles, with normals and
 //! each vertex's distance from the bare posed model as the float property `offset`,
-//! metres), and `NNNNNN.track.yaml`, what tracking it did (written last).
+//! metres), and `NNNNNN.track.yaml`, what tracking it did and how well the tracked surface
+//! and the bare posed model explain the silhouettes (written last).
 
 use crate::cache::Cache;
 use crate::dataset::frame_stem;
@@ -16,7 +17,8 @@ use std::path::{Path, PathBuf};
 pub const STAGE: &str = "surface";
 
 /// Format of the files (bumped with any change of their fields or meaning).
-pub const FORMAT: u32 = 1;
+/// 2: the silhouette IoU of the tracked surface and of the bare posed model.
+pub const FORMAT: u32 = 2;
 
 fn files(frame: u32) -> [String; 2] {
     let s = frame_stem(frame);
@@ -49,6 +51,8 @@ struct StatsFile {
     median_offset: f64,
     max_offset: f64,
     iterations: usize,
+    iou_worst: f64,
+    iou_worst_posed: f64,
 }
 
 /// Rounds every coordinate to a 32-bit float (as the PLY stores it).
@@ -84,6 +88,8 @@ impl super::Artifact for TrackedSurface {
             median_offset: s.median_offset,
             max_offset: s.max_offset,
             iterations: s.iterations,
+            iou_worst: s.iou_worst,
+            iou_worst_posed: s.iou_worst_posed,
         })?;
         crate::fsutil::write_atomic(&dir.join(&names[1]), text.as_bytes())?;
         Ok(names.to_vec())
@@ -115,5 +121,7 @@ pub fn read_stats(cache: &Cache, frame: u32) -> Result<TrackStats> {
         median_offset: s.median_offset,
         max_offset: s.max_offset,
         iterations: s.iterations,
+        iou_worst: s.iou_worst,
+        iou_worst_posed: s.iou_worst_posed,
     })
 }

@@ -320,7 +320,7 @@ fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> 
 }
 
 /// Cell of the coarse model the fit's health is measured with, metres.
-const HEALTH_CELL: f64 = 0.02;
+pub(crate) const HEALTH_CELL: f64 = 0.02;
 
 /// What the health checks measure a fitted pose with: the model coarsened for the
 /// silhouettes, and its parts as capsules.

@@ -433,7 +433,7 @@ pub const STAGES: &[StageDef] = &[
         format_version: crate::artifacts::tracked_surface::FORMAT,
         sources: surface::sources,
         compute: Compute::Tracked(&surface::STAGE),
-        finish: None,
+        finish: Some(surface::finish),
     },
 ];
 

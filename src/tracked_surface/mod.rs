@@ -145,6 +145,11 @@ pub struct TrackStats {
     pub max_offset: f64,
     /// Conjugate-gradient iterations over all rounds.
     pub iterations: usize,
+    /// The worst camera's silhouette IoU of the tracked surface and of the bare posed
+    /// model, [0, 1] ([`crate::fit::health::silhouette_iou`], at the health's resolution;
+    /// set by the surface stage, 0 when not measured).
+    pub iou_worst: f64,
+    pub iou_worst_posed: f64,
 }
 
 /// Tracks a sequence's frames for one body model.

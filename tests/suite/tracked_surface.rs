@@ -43,6 +43,32 @@ fn a_loose_dress_is_followed_where_the_skinned_model_is_not() {
         }
     }
 
+    // The stage's health: every frame's tracked surface explains the silhouettes at least
+    // as well as the bare posed model less 0.01, and well (worst camera at least 0.9).
+    let table = std::fs::read_to_string(d.join("output/surface.csv")).unwrap();
+    let mut lines = table.lines();
+    assert_eq!(
+        lines.next(),
+        Some(hullpose::stages::surface::TABLE_HEADER),
+        "{table}"
+    );
+    let health: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(health.len(), 24, "{table}");
+    for row in &health {
+        let (tracked, posed) = (row[1], row[2]);
+        assert!(
+            tracked >= posed - 0.01 && tracked >= 0.9,
+            "frame {}: tracked {tracked} against posed {posed}",
+            row[0]
+        );
+    }
+    assert!(
+        out.contains("tracked surface: worst-camera silhouette IoU"),
+        "{out}"
+    );
+
     // Resumed: frames 12.. computed again from the cached frame 11 give the same files.
     let surface = d.join("cache/surface");
     let fresh: Vec<Vec<u8>> = (12..24)
