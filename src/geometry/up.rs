@@ -3,8 +3,11 @@
 //! Two cues from the cameras alone: the mean of the cameras' image-up directions (people
 //! mount cameras upright, so each image's up is near the world's; tilts towards the
 //! subject cancel around a ring), and the normal of the plane through the camera centres
-//! (a ring at about one height), turned to the side the images call up. A third cue, where
-//! the person model saw the subject, is the body's standing axis (ankles to shoulders).
+//! (a ring at about one height), turned to the side the images call up. Where every
+//! camera's image x axis lies in one plane (cameras mounted without roll, whatever their
+//! tilt), that plane is level and its normal is the up: exact, where the other two cues
+//! carry the cameras' tilts and heights. A third cue, where the person model saw the
+//! subject, is the body's standing axis (ankles to shoulders).
 
 use crate::camera::Camera;
 use nalgebra::{Matrix3, Vector3};
@@ -17,12 +20,16 @@ pub const DISAGREEMENT_DEG: f64 = 20.0;
 /// real dancer's lie 7 degrees to either side of her up, their mean within half a degree).
 pub const AVERAGED_DEG: f64 = 30.0;
 
+/// The cameras' image x axes lie in one plane within this, degrees RMS, for that plane to
+/// be taken as level (the synthetic rings: 0; the real dancer's 8 cameras: 4.9, rolled).
+pub const LEVEL_RMS_DEG: f64 = 1.0;
+
 /// The up direction and the cues it came from (unit vectors, world frame).
 #[derive(Debug, Clone, PartialEq)]
 pub struct UpEstimate {
-    /// The estimate: the mean of the image up and the rig's normal when they lie within
-    /// [`AVERAGED_DEG`], else
-    /// the standing axis where there is one, else the image up.
+    /// The estimate: the level cameras' normal where there is one, else the mean of the
+    /// image up and the rig's normal when they lie within [`AVERAGED_DEG`], else the
+    /// standing axis where there is one, else the image up.
     pub up: Vector3<f64>,
     /// The normalized sum of the cameras' image-up directions.
     pub image_up: Vector3<f64>,
@@ -31,6 +38,10 @@ pub struct UpEstimate {
     pub rig_normal: Option<Vector3<f64>>,
     /// The subject's standing axis, if given.
     pub standing: Option<Vector3<f64>>,
+    /// The normal of the plane the cameras' image x axes lie in, where they lie in one
+    /// within [`LEVEL_RMS_DEG`] (3 cameras or more, not all facing one way), on the
+    /// image-up side.
+    pub level: Option<Vector3<f64>>,
 }
 
 impl UpEstimate {
@@ -60,6 +71,13 @@ impl UpEstimate {
         let mut cues = vec![format!("the cameras' image up {}", v(&self.image_up))];
         if let Some(n) = &self.rig_normal {
             cues.push(format!("the rig's plane normal {}", v(n)));
+        }
+        if let Some(l) = &self.level {
+            cues.push(format!(
+                "the level cameras' normal {} (their image x axes in one plane within {LEVEL_RMS_DEG:.0} \
+                 degree, which decides)",
+                v(l)
+            ));
         }
         if let Some(s) = &self.standing {
             cues.push(format!("the subject's standing axis {}", v(s)));
@@ -129,7 +147,10 @@ pub fn estimate(cams: &[Camera], standing: Option<Vector3<f64>>) -> Option<UpEst
     let standing = standing.and_then(|s| s.try_normalize(1e-9));
     // The cameras' cues first: a subject leans, bends and dances; where they disagree (a
     // rig on one side of the subject), the subject's standing axis decides.
+    let level = level_normal(cams).map(|l| if l.dot(&image_up) < 0.0 { -l } else { l });
+    let level = level.filter(|l| angle_deg(l, &image_up) <= AVERAGED_DEG);
     let up = match (rig_normal, standing) {
+        _ if level.is_some() => level.expect("checked"),
         (Some(n), _) if angle_deg(&n, &image_up) <= AVERAGED_DEG => (n + image_up).normalize(),
         (_, Some(s)) => s,
         // Rolled cameras (a gantry, a camera on its side): a ring's plane is the better cue.
@@ -141,7 +162,35 @@ pub fn estimate(cams: &[Camera], standing: Option<Vector3<f64>>) -> Option<UpEst
         image_up,
         rig_normal,
         standing,
+        level,
     })
+}
+
+/// The normal of the plane the cameras' image x axes (R^T e_x, world) lie in, if they lie
+/// in one within [`LEVEL_RMS_DEG`] and span it (a camera without roll has a level x axis,
+/// so the normal is the up whatever the cameras' tilts; cameras all facing one way leave
+/// it undetermined).
+fn level_normal(cams: &[Camera]) -> Option<Vector3<f64>> {
+    if cams.len() < 3 {
+        return None;
+    }
+    let mut m = Matrix3::zeros();
+    for c in cams {
+        let x = c.r.transpose() * Vector3::x();
+        m += x * x.transpose();
+    }
+    let eig = m.symmetric_eigen();
+    let mut order: Vec<usize> = (0..3).collect();
+    order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+    let n = cams.len() as f64;
+    // The x axes' RMS angle out of the plane: sin^2 summed is the least eigenvalue.
+    let rms = (eig.eigenvalues[order[0]].max(0.0) / n)
+        .sqrt()
+        .asin()
+        .to_degrees();
+    // Spanning the plane: the second direction holds a fair share of the axes.
+    let spans = eig.eigenvalues[order[1]] >= 0.2 * n;
+    (rms <= LEVEL_RMS_DEG && spans).then(|| eig.eigenvectors.column(order[0]).into_owned())
 }
 
 /// The normal of the least-squares plane through the camera centres, if they span one
@@ -193,6 +242,33 @@ mod tests {
             c
         })
         .collect()
+    }
+
+    #[test]
+    fn level_cameras_give_the_up_exactly_and_rolled_ones_do_not_decide() {
+        let tilt = Rotation3::from_axis_angle(
+            &nalgebra::Unit::new_normalize(Vector3::new(1.0, 2.0, 0.5)),
+            25f64.to_radians(),
+        );
+        let truth = tilt * Vector3::z();
+        let cams = ring(tilt, 8, vec![1.0, 2.0]);
+        let e = estimate(&cams, None).unwrap();
+        assert!(e.level.is_some(), "{e:?}");
+        assert!(angle_deg(&e.up, &truth) < 0.01, "{e:?}");
+        // Each camera rolled 4 degrees about its optical axis, alternately: no level plane.
+        let rolled: Vec<Camera> = cams
+            .into_iter()
+            .enumerate()
+            .map(|(i, mut c)| {
+                let deg: f64 = if i % 2 == 0 { 4.0 } else { -4.0 };
+                let roll = Rotation3::from_axis_angle(&Vector3::z_axis(), deg.to_radians());
+                c.r = roll.matrix() * c.r;
+                c
+            })
+            .collect();
+        let e = estimate(&rolled, None).unwrap();
+        assert!(e.level.is_none(), "{e:?}");
+        assert!(angle_deg(&e.up, &truth) < 2.0, "{e:?}");
     }
 
     #[test]
