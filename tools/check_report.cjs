@@ -62,7 +62,12 @@ const puppeteer = require('puppeteer-core');
     const fourth = await state();
     await page.screenshot({ path: path.join(shots, 'report-frame4.png') });
     await page.$eval('#show-graphcut', (c) => { c.checked = true; c.dispatchEvent(new Event('change')); });
+    await page.$eval('#show-tracked', (c) => { c.checked = true; c.dispatchEvent(new Event('change')); });
     await page.screenshot({ path: path.join(shots, 'report-frame4-surface.png'), fullPage: true });
+    const shownSurfaces = await page.evaluate(() => window.hullposeReport.shownSurfaces());
+    for (const kind of ['graphcut', 'tracked']) {
+      if (!shownSurfaces.includes(kind)) problems.push('the ' + kind + ' surface is not shown when ticked: ' + JSON.stringify(shownSurfaces));
+    }
     let moved = 0;
     first.points.forEach((p, i) => { moved += Math.hypot(p[0] - fourth.points[i][0], p[1] - fourth.points[i][1]); });
     moved /= Math.max(1, first.points.length);

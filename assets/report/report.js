@@ -67,8 +67,10 @@
   const surfaceMaterials = {
     graphcut: new THREE.MeshLambertMaterial({ color: 0xbfc8d0, transparent: true, opacity: 0.45, side: THREE.DoubleSide, depthWrite: false }),
     hull: new THREE.MeshBasicMaterial({ color: 0x4da3ff, wireframe: true, transparent: true, opacity: 0.35 }),
+    tracked: new THREE.MeshLambertMaterial({ color: 0xe8a15c, transparent: true, opacity: 0.6, side: THREE.DoubleSide, depthWrite: false }),
   };
-  const surfaces = { graphcut: null, hull: null };
+  const surfaceKinds = ['graphcut', 'hull', 'tracked'];
+  const surfaces = { graphcut: null, hull: null, tracked: null };
   const surfaceCache = new Map();
   function surfaceMesh(kind, f) {
     const key = kind + '-' + f;
@@ -181,7 +183,7 @@
   }
   function showSurfaces(f) {
     const sf = nearestSurfaceFrame(f);
-    for (const kind of ['graphcut', 'hull']) {
+    for (const kind of surfaceKinds) {
       if (surfaces[kind]) scene.remove(surfaces[kind]);
       surfaces[kind] = null;
       if (el('show-' + kind).checked && sf !== undefined) {
@@ -189,7 +191,7 @@
         if (surfaces[kind]) scene.add(surfaces[kind]);
       }
     }
-    const shown = el('show-graphcut').checked || el('show-hull').checked;
+    const shown = surfaceKinds.some((kind) => el('show-' + kind).checked);
     el('surface-note').textContent = shown && sf !== f ? '(surfaces of frame ' + sf + ': the page keeps ' + data.surfaceFrames.length + ' frames\u2019 surfaces)' : '';
   }
   function setFrame(i) {
@@ -215,7 +217,7 @@
   }
   slider.addEventListener('input', () => setFrame(Number(slider.value)));
   cameraSelect.addEventListener('change', () => setFrame(current));
-  ['show-model', 'show-skeleton', 'show-graphcut', 'show-hull'].forEach((id) => el(id).addEventListener('change', () => setFrame(current)));
+  ['show-model', 'show-skeleton', 'show-graphcut', 'show-hull', 'show-tracked'].forEach((id) => el(id).addEventListener('change', () => setFrame(current)));
   let timer = null;
   el('play').addEventListener('click', () => {
     if (timer) { clearInterval(timer); timer = null; el('play').textContent = 'Play'; return; }
@@ -322,6 +324,8 @@
     setFrame: setFrame,
     current: () => current,
     overlaySrc: () => el('overlay').getAttribute('src'),
+    // The surfaces in the 3D view now: 'graphcut', 'hull', 'tracked'.
+    shownSurfaces: () => surfaceKinds.filter((kind) => surfaces[kind] !== null),
     // The model's vertices projected into the canvas, CSS pixels (every k-th).
     modelScreenPoints: (k) => {
       const out = [];

@@ -1,6 +1,7 @@
 //! `pipeline report`: one HTML page, `<output>/report/index.html`, to look at a run: the
 //! fitted model playing its motion in a 3D view (three.js, vendored into the page), the
-//! frame's refined surface and visual hull as toggles, the skeleton over it, a frame slider
+//! frame's refined surface, visual hull and tracked surface (where the surface stage ran) as
+//! toggles, the skeleton over it, a frame slider
 //! synchronised with a camera's overlay and the contact sheet, the fit's health as plots,
 //! the run summary, the parameters, and `pipeline evaluate`'s tables when it has run.
 //!
@@ -142,7 +143,9 @@ pub fn write(job: &Job) -> Result<Written> {
     // Surfaces for at most SURFACE_FRAMES frames, evenly spread.
     let stride = frames.len().div_ceil(SURFACE_FRAMES).max(1);
     let surface_frames: Vec<u32> = frames.iter().copied().step_by(stride).collect();
-    let surfaces: Vec<(u32, String, String)> = surface_frames
+    // Each as (kind, JSON): the refined surface, the hull, and the tracked surface where the
+    // surface stage has run.
+    let surfaces: Vec<(u32, Vec<(&str, String)>)> = surface_frames
         .par_iter()
         .map(|&f| {
             let mesh = |s| -> Result<String> {
@@ -150,7 +153,15 @@ pub fn write(job: &Job) -> Result<Written> {
                 Ok(coarse_surface(&m, &frame).to_string())
             };
             use crate::artifacts::reconstruction::Surface;
-            Ok((f, mesh(Surface::Refined)?, mesh(Surface::Hull)?))
+            let mut kinds = vec![
+                ("graphcut", mesh(Surface::Refined)?),
+                ("hull", mesh(Surface::Hull)?),
+            ];
+            if crate::artifacts::tracked_surface::ply_path(cache, f).is_file() {
+                let m = crate::artifacts::tracked_surface::read_mesh(cache, f)?;
+                kinds.push(("tracked", coarse_surface(&m, &frame).to_string()));
+            }
+            Ok((f, kinds))
         })
         .collect::<Result<_>>()?;
 
@@ -219,8 +230,8 @@ pub fn write(job: &Job) -> Result<Written> {
         "tables": tables,
     });
     let mut surface_blocks = String::new();
-    for (f, refined, hull) in &surfaces {
-        for (kind, text) in [("graphcut", refined), ("hull", hull)] {
+    for (f, kinds) in &surfaces {
+        for (kind, text) in kinds {
             surface_blocks.push_str(&format!(
                 "<script type=\"application/json\" id=\"surface-{kind}-{f}\">{}</script>\n",
                 script_safe(text)

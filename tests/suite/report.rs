@@ -77,6 +77,14 @@ fn the_report_opens_from_disk_draws_the_model_and_follows_the_slider() {
         "external resources"
     );
     assert!(!page.contains("type=\"module\""));
+    // Every kept frame's refined surface, hull and tracked surface (the run made all three).
+    for kind in ["graphcut", "hull", "tracked"] {
+        assert_eq!(
+            page.matches(&format!("id=\"surface-{kind}-")).count(),
+            7,
+            "{kind}"
+        );
+    }
     assert!(page.contains("Three.js Authors") && page.contains("SPDX-License-Identifier: MIT"));
     // The data element holds no `<` at all (every one escaped as \u003c) and parses as JSON.
     let start = page.find("id=\"report-data\"").expect("the data element");
