@@ -98,8 +98,14 @@ impl CoarseModel {
 
     /// The coarse mesh at the pose of `posed` (the full model mesh posed).
     pub fn posed(&self, posed: &TriMesh) -> TriMesh {
+        self.at(&posed.vertices)
+    }
+
+    /// The coarse mesh over `vertices`, the full model's vertices wherever they are (a
+    /// posed model, or a surface of the model's topology moved from it).
+    pub fn at(&self, vertices: &[Vector3<f64>]) -> TriMesh {
         TriMesh {
-            vertices: self.keep.iter().map(|&i| posed.vertices[i]).collect(),
+            vertices: self.keep.iter().map(|&i| vertices[i]).collect(),
             triangles: self.triangles.clone(),
         }
     }

@@ -1245,12 +1245,16 @@ fn torso_depth(
         .fold(0.0, f64::max)
 }
 
-/// Per arm (a limb whose root lies above the shoulders' line), the deepest point along its
-/// bones after the first, as a share of the torso's depth.
-fn arm_depths(interior: &Interior, template: &Skeleton, joints: &Joints) -> Vec<(String, f64)> {
-    let limbs = limbs(template);
-    let torso_depth = torso_depth(interior, template, joints, &limbs);
-    let shoulders = shoulder_line(joints);
+/// Per arm (one of `limbs` whose root lies above `shoulders`, metres), the deepest point
+/// along its bones after the first, as a share of `torso_depth` (metres).
+fn arm_depths(
+    interior: &Interior,
+    template: &Skeleton,
+    joints: &Joints,
+    limbs: &[Vec<usize>],
+    torso_depth: f64,
+    shoulders: f64,
+) -> Vec<(String, f64)> {
     limbs
         .iter()
         .filter(|limb| joints.bone(limb[0]).0.z >= shoulders)
@@ -1312,7 +1316,8 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
     }
     // An arm laid through the torso (its forearm or hand as deep inside the body as the
     // torso's middle, where an arm's own part is about its radius deep) is in no limb.
-    for (name, share) in arm_depths(interior, template, joints) {
+    let shoulders = shoulder_line(joints);
+    for (name, share) in arm_depths(interior, template, joints, &limbs, torso_depth, shoulders) {
         if share > ARM_DEPTH_SHARE {
             return Err(format!(
                 "the arm from '{name}' runs through the torso (its lower bones reach {:.0}% of \
@@ -1326,7 +1331,6 @@ fn check(interior: &Interior, template: &Skeleton, joints: &Joints) -> Result<()
     }
     // The head stands up from the shoulders: an unpaired end chain above them (neck and
     // head) tipped further than [`HEAD_TILT_DEG`] from up has been laid in an arm.
-    let shoulders = shoulder_line(joints);
     for chain in end_chains(template) {
         let unpaired = chain
             .iter()

@@ -45,11 +45,7 @@ fn compute(settings: &Settings, inputs: &Inputs, frames: &[u32], done: Done) -> 
     // The health's silhouette measure, on the surfaces coarsened as the fit's health is.
     let coarse = crate::fit::health::CoarseModel::new(&model.mesh, super::fit::HEALTH_CELL);
     let worst_iou = |vertices: &[Vector3<f64>], masks: &[image::GrayImage]| -> f64 {
-        let mesh = crate::geometry::TriMesh {
-            vertices: vertices.to_vec(),
-            triangles: model.mesh.triangles.clone(),
-        };
-        crate::fit::health::silhouette_iou(&seq.cameras, masks, &coarse.posed(&mesh))
+        crate::fit::health::silhouette_iou(&seq.cameras, masks, &coarse.at(vertices))
             .into_iter()
             .fold(1.0, f64::min)
     };
